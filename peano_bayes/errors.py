@@ -1,0 +1,36 @@
+"""Errors a user can cause. The command line turns every one into a one-line message and exit status 2."""
+
+from __future__ import annotations
+
+
+class PeanoBayesInputError(ValueError):
+    """Bad input: a file, a specification or an argument that cannot be used as given.
+
+    The message names what was wrong, where, the value seen and what was expected.
+    """
+
+
+class DataFormatError(PeanoBayesInputError):
+    """A rig dataset (CSV + TOML sidecar) does not follow the documented format.
+
+    Attributes ``file``, ``row`` (1-based line number in the file, header = 1), ``column``, ``value`` and
+    ``expected`` locate the problem; any of them may be ``None`` when it does not apply.
+    """
+
+    def __init__(self, message: str, *, file=None, row=None, column=None, value=None, expected=None):
+        self.file, self.row, self.column, self.value, self.expected = file, row, column, value, expected
+        where = ", ".join(
+            part
+            for part in (
+                f"{file}" if file is not None else None,
+                f"row {row}" if row is not None else None,
+                f"column '{column}'" if column is not None else None,
+            )
+            if part
+        )
+        detail = message
+        if value is not None:
+            detail += f": got {value!r}"
+        if expected is not None:
+            detail += f"; expected {expected}"
+        super().__init__(f"{where}: {detail}" if where else detail)

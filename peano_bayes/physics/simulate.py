@@ -1,0 +1,331 @@
+"""The paper's four rig tests (Veale et al. 2016, Tables 3 and 4) as pure functions (params, protocol) -> signals.
+
+Every function is ``jit``-, ``vmap``- and ``grad``-able in ``params`` (a dict of named scalars, see
+:data:`peano_bayes.physics.model.PARAMETERS`). Each time step solves one monotone scalar equation for the tube
+half-angle: the first sample by bisection (``optimistix``), later ones by Newton warm-started from the previous
+sample, with implicit-function gradients (``jax.lax.custom_root``). Each result carries ``max_residual``, the
+largest equilibrium error left by the solver, so callers can check convergence.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import optimistix as optx
+
+from .geometry import PAPER_GEOMETRY, Geometry
+from .model import (
+    DEFAULT_CONFIG,
+    GRAVITY_M_PER_S2,
+    THETA_MAX,
+    THETA_MIN,
+    WATER_DENSITY_KG_PER_M3,
+    ModelConfig,
+    chain,
+    initial_state,
+    total_force,
+    volume_m3,
+)
+
+_LOG_THETA = (float(jnp.log(THETA_MIN)), float(jnp.log(THETA_MAX)))
+#: Newton corrections per sample. Warm-started, quasi-static tests converge to ~1e-12 m in three.
+QUASI_STATIC_ITERATIONS = 3
+DYNAMIC_ITERATIONS = 5
+
+
+# --- protocols ----------------------------------------------------------------------------------------------
+
+
+class LoadCycle(eqx.Module):
+    """Imposed strain history at a pressure: the rig stretches and relaxes the muscle slowly.
+
+    ``time_s``, ``strain`` [-] and ``pressure_pa`` are arrays of shape (n,); the first sample is the start
+    (the paper starts from the start tension, see :func:`static_strain`).
+    """
+
+    time_s: jnp.ndarray
+    strain: jnp.ndarray
+    pressure_pa: jnp.ndarray
+
+
+class Blocking(eqx.Module):
+    """Pressure ramp ``pressure_pa`` (n,) over ``time_s`` (n,) with the muscle held at zero strain."""
+
+    time_s: jnp.ndarray
+    pressure_pa: jnp.ndarray
+
+
+class Stroke(eqx.Module):
+    """Pressure ramp ``pressure_pa`` (n,) over ``time_s`` (n,) lifting a hanging load ``load_n`` [N] (paper: 5.5 N)."""
+
+    time_s: jnp.ndarray
+    pressure_pa: jnp.ndarray
+    load_n: float = 5.5
+
+
+class Step(eqx.Module):
+    """Supply pressure step ``supply_pa`` (n,) over ``time_s`` (n,) through the inlet restriction into the
+    muscle, lifting an inertial load of weight ``load_n`` [N]. The muscle starts at rest, in equilibrium with the
+    load at ``supply_pa[0]``. ``substeps`` integration steps are taken per sample interval."""
+
+    time_s: jnp.ndarray
+    supply_pa: jnp.ndarray
+    load_n: float
+    substeps: int = eqx.field(static=True, default=1)
+
+
+# --- results ------------------------------------------------------------------------------------------------
+
+
+class ForceResult(NamedTuple):
+    force_n: jnp.ndarray  # (n,) force at the load cell
+    half_angle_rad: jnp.ndarray  # (n,)
+    max_residual: jnp.ndarray  # () largest equilibrium error [m or N]
+
+
+class StrokeResult(NamedTuple):
+    strain: jnp.ndarray  # (n,)
+    half_angle_rad: jnp.ndarray
+    max_residual: jnp.ndarray
+
+
+class StepResult(NamedTuple):
+    strain: jnp.ndarray  # (n,) contraction strain
+    velocity_m_per_s: jnp.ndarray  # (n,) load velocity, positive when lifting
+    pressure_pa: jnp.ndarray  # (n,) muscle pressure
+    flow_m3_per_s: jnp.ndarray  # (n,) flow into the muscle
+    force_n: jnp.ndarray  # (n,) muscle force on the load
+    max_residual: jnp.ndarray
+
+
+# --- the scalar solve ---------------------------------------------------------------------------------------
+
+
+def _newton(iterations: int):
+    def solve(fn, z):
+        for _ in range(iterations):
+            r, dr = jax.jvp(fn, (z,), (jnp.ones_like(z),))
+            z = jnp.clip(z - r / dr, *_LOG_THETA)
+        return z
+
+    return solve
+
+
+def _bisection(residual, atol: float, increasing: bool):
+    """Bracketed bisection (optimistix) over the whole admissible range of log(theta).
+
+    The orientation is known (no detection), so a root beyond the range converges to its nearest end:
+    an ideal muscle with no bending reaches its free strain only at theta = pi/2.
+    """
+    sol = optx.root_find(
+        lambda z, _: residual(z), optx.Bisection(rtol=0.0, atol=atol, flip=not increasing), jnp.asarray(0.0),
+        options=dict(lower=_LOG_THETA[0], upper=_LOG_THETA[1]), max_steps=256, throw=False,
+    )
+    return sol.value
+
+
+def _solve_log_theta(residual, z_guess=None, iterations: int = QUASI_STATIC_ITERATIONS, bracket_atol=None,
+                     increasing: bool = True):
+    """Root of a monotone ``residual(log theta)``, with implicit-function gradients.
+
+    Newton from ``z_guess`` (a warm start), or, with ``bracket_atol``, from a bisection over the whole range
+    narrowed to ``bracket_atol`` in log(theta): robust when the state can jump (pressure steps, cold starts).
+    ``increasing`` says whether the residual rises with theta.
+    """
+    if bracket_atol is not None:
+        z_guess = jax.lax.stop_gradient(_bisection(residual, bracket_atol, increasing))
+    return jax.lax.custom_root(residual, z_guess, _newton(iterations), lambda g, y: y / g(1.0))
+
+
+def _bracketed_log_theta(residual, increasing: bool):
+    """Cold-start root of a monotone ``residual(log theta)``: bisection to 1e-3, then Newton polish."""
+    return _solve_log_theta(residual, iterations=4, bracket_atol=1e-3, increasing=increasing)
+
+
+def _strain_residual(strain, pressure_pa, dt_s, state, params, config, geometry):
+    l0 = geometry.flat_length_m
+    return lambda z: chain(jnp.exp(z), pressure_pa, dt_s, state, params, config, geometry).shortening_m - strain * l0
+
+
+def _force_residual(load_n, pressure_pa, dt_s, state, params, config, geometry):
+    def residual(z):
+        link = chain(jnp.exp(z), pressure_pa, dt_s, state, params, config, geometry)
+        return total_force(link.shortening_m / geometry.flat_length_m, link, params, config, geometry)[0] - load_n
+
+    return residual
+
+
+def static_strain(params, pressure_pa, force_n, *, config: ModelConfig = DEFAULT_CONFIG,
+                  geometry: Geometry = PAPER_GEOMETRY):
+    """Equilibrium strain [-] of a relaxed muscle (no history) at ``pressure_pa`` [Pa] under tension ``force_n`` [N].
+
+    Used to place the start of a load cycle at the start tension, and for the free strain (``force_n = 0``).
+    """
+    state = initial_state(config)
+    z = _bracketed_log_theta(_force_residual(force_n, pressure_pa, 1.0, state, params, config, geometry), False)
+    link = chain(jnp.exp(z), pressure_pa, 1.0, state, params, config, geometry)
+    return link.shortening_m / geometry.flat_length_m
+
+
+def _first_theta_at_strain(strain, pressure_pa, params, config, geometry):
+    state = initial_state(config)
+    return _bracketed_log_theta(_strain_residual(strain, pressure_pa, 1.0, state, params, config, geometry), True)
+
+
+def _strain_controlled(params, time_s, strain, pressure_pa, config, geometry, bracket_atol=None) -> ForceResult:
+    state0 = initial_state(config)
+    z0 = _first_theta_at_strain(strain[0], pressure_pa[0], params, config, geometry)
+    link0 = chain(jnp.exp(z0), pressure_pa[0], 1.0, state0, params, config, geometry)
+    force0, state0 = total_force(strain[0], link0, params, config, geometry)
+    dts = jnp.diff(time_s)
+
+    def step(carry, inputs):
+        z, state = carry
+        eps, p, dt = inputs
+        residual = _strain_residual(eps, p, dt, state, params, config, geometry)
+        z = _solve_log_theta(residual, z, QUASI_STATIC_ITERATIONS, bracket_atol)
+        link = chain(jnp.exp(z), p, dt, state, params, config, geometry)
+        force, state = total_force(eps, link, params, config, geometry)
+        return (z, state), (force, z, jnp.abs(link.shortening_m - eps * geometry.flat_length_m))
+
+    _, (force, z, err) = jax.lax.scan(step, (z0, state0), (strain[1:], pressure_pa[1:], dts))
+    return ForceResult(
+        jnp.concatenate([force0[None], force]), jnp.exp(jnp.concatenate([z0[None], z])), jnp.max(err)
+    )
+
+
+# --- the four tests -----------------------------------------------------------------------------------------
+
+
+def simulate_load_cycle(params, protocol: LoadCycle, *, config: ModelConfig = DEFAULT_CONFIG,
+                        geometry: Geometry = PAPER_GEOMETRY) -> ForceResult:
+    """Load cycle: force [N] along an imposed strain history at the protocol's pressure.
+
+    Hysteresis comes out of the loss elements of ``config`` (friction, Maxwell, Kelvin), not from two curves.
+    """
+    return _strain_controlled(params, protocol.time_s, protocol.strain, protocol.pressure_pa, config, geometry)
+
+
+def simulate_blocking(params, protocol: Blocking, *, config: ModelConfig = DEFAULT_CONFIG,
+                      geometry: Geometry = PAPER_GEOMETRY) -> ForceResult:
+    """Blocking test: force [N] of the muscle held at its unstretched length (strain 0) along a pressure ramp."""
+    strain = jnp.zeros_like(protocol.pressure_pa)
+    # The pressure ramp starts at 0 kPa, where the half-angle changes by decades: bracket every sample.
+    return _strain_controlled(params, protocol.time_s, strain, protocol.pressure_pa, config, geometry,
+                              bracket_atol=1e-3)
+
+
+def simulate_stroke(params, protocol: Stroke, *, config: ModelConfig = DEFAULT_CONFIG,
+                    geometry: Geometry = PAPER_GEOMETRY) -> StrokeResult:
+    """Stroke test: strain [-] of the muscle lifting a hanging load quasi-statically along a pressure ramp."""
+    l0 = geometry.flat_length_m
+    state0 = initial_state(config)
+    load = protocol.load_n
+    z0 = _bracketed_log_theta(
+        _force_residual(load, protocol.pressure_pa[0], 1.0, state0, params, config, geometry), increasing=False
+    )
+    link0 = chain(jnp.exp(z0), protocol.pressure_pa[0], 1.0, state0, params, config, geometry)
+    _, state0 = total_force(link0.shortening_m / l0, link0, params, config, geometry)
+
+    def step(carry, inputs):
+        z, state = carry
+        p, dt = inputs
+        residual = _force_residual(load, p, dt, state, params, config, geometry)
+        z = _solve_log_theta(residual, z, QUASI_STATIC_ITERATIONS, bracket_atol=1e-3, increasing=False)
+        link = chain(jnp.exp(z), p, dt, state, params, config, geometry)
+        strain = link.shortening_m / l0
+        force, state = total_force(strain, link, params, config, geometry)
+        return (z, state), (strain, z, jnp.abs(force - load))
+
+    _, (strain, z, err) = jax.lax.scan(step, (z0, state0), (protocol.pressure_pa[1:], jnp.diff(protocol.time_s)))
+    return StrokeResult(
+        jnp.concatenate([(link0.shortening_m / l0)[None], strain]),
+        jnp.exp(jnp.concatenate([z0[None], z])),
+        jnp.max(err),
+    )
+
+
+def _pressure_drop_pa(flow_m3_per_s, params, config: ModelConfig):
+    """Pressure lost across the inlet restriction [Pa] at ``flow_m3_per_s`` (signed, water)."""
+    if config.flow == "laminar":
+        return flow_m3_per_s / params["laminar_conductance_m3_per_s_pa"]
+    velocity = flow_m3_per_s / params["orifice_area_m2"]
+    return 0.5 * WATER_DENSITY_KG_PER_M3 * velocity * jnp.abs(velocity)
+
+
+def _load_damping_n(velocity, params, config: ModelConfig):
+    if not config.damping:
+        return jnp.zeros_like(velocity)
+    up = jnp.maximum(velocity, 0.0)
+    down = jnp.minimum(velocity, 0.0)
+    return (params["damping_up_ns_per_m"] * up + params["damping_down_ns_per_m"] * down
+            + params["damping_quadratic_ns2_per_m2"] * jnp.abs(velocity) * velocity)
+
+
+def simulate_step(params, protocol: Step, *, config: ModelConfig = DEFAULT_CONFIG,
+                  geometry: Geometry = PAPER_GEOMETRY) -> StepResult:
+    """Step response: the supply pressure steps, water flows through the inlet restriction into the changing
+    muscle volume, and the muscle lifts the inertial load of weight ``protocol.load_n``.
+
+    Load: ``m y'' = F - m g - damping(y')`` (semi-implicit Euler). Water is incompressible, so the muscle
+    pressure follows from the flow the volume change demands: ``p = p_supply - dp(dV/dt)`` (backward Euler in the
+    volume, which keeps the stiff flow coupling stable). Returns strain, velocity, muscle pressure, flow, force.
+    """
+    l0 = geometry.flat_length_m
+    load = protocol.load_n
+    mass = load / GRAVITY_M_PER_S2
+    n_sub = protocol.substeps
+    state0 = initial_state(config)
+    supply0 = protocol.supply_pa[0]
+    z0 = _bracketed_log_theta(_force_residual(load, supply0, 1.0, state0, params, config, geometry), False)
+    link0 = chain(jnp.exp(z0), supply0, 1.0, state0, params, config, geometry)
+    y0 = link0.shortening_m
+    force0, state0 = total_force(y0 / l0, link0, params, config, geometry)
+    volume0 = volume_m3(jnp.exp(z0), params, geometry)
+
+    def substep(carry, inputs):
+        z, state, y, v, volume, force = carry
+        supply, dt = inputs
+        v = v + dt * (force - load - _load_damping_n(v, params, config)) / mass
+        y = y + dt * v
+
+        def muscle_pressure(z_):
+            flow = (volume_m3(jnp.exp(z_), params, geometry) - volume) / dt
+            return supply - _pressure_drop_pa(flow, params, config), flow
+
+        def residual(z_):
+            p, _ = muscle_pressure(z_)
+            return chain(jnp.exp(z_), p, dt, state, params, config, geometry).shortening_m - y
+
+        z = _solve_log_theta(residual, z, DYNAMIC_ITERATIONS, bracket_atol=1e-3)
+        p, flow = muscle_pressure(z)
+        link = chain(jnp.exp(z), p, dt, state, params, config, geometry)
+        force, state = total_force(y / l0, link, params, config, geometry)
+        volume = volume_m3(jnp.exp(z), params, geometry)
+        err = jnp.abs(link.shortening_m - y)
+        return (z, state, y, v, volume, force), (p, flow, err)
+
+    def sample(carry, inputs):
+        supply, dt = inputs
+        sub_inputs = (jnp.full(n_sub, supply), jnp.full(n_sub, dt / n_sub))
+        carry, (p, flow, err) = jax.lax.scan(substep, carry, sub_inputs)
+        z, state, y, v, volume, force = carry
+        return carry, (y / l0, v, p[-1], flow[-1], force, jnp.max(err))
+
+    carry0 = (z0, state0, y0, jnp.zeros(()), volume0, force0)
+    _, (strain, v, p, flow, force, err) = jax.lax.scan(
+        sample, carry0, (protocol.supply_pa[1:], jnp.diff(protocol.time_s))
+    )
+    first = lambda a0, a: jnp.concatenate([jnp.asarray(a0, dtype=a.dtype)[None], a])  # noqa: E731
+    return StepResult(
+        first(y0 / l0, strain), first(0.0, v), first(supply0, p), first(0.0, flow), first(force0, force), jnp.max(err)
+    )
+
+
+__all__ = [
+    "Blocking", "ForceResult", "LoadCycle", "Step", "StepResult", "Stroke", "StrokeResult",
+    "simulate_blocking", "simulate_load_cycle", "simulate_step", "simulate_stroke", "static_strain",
+]

@@ -1,0 +1,230 @@
+"""The four rig tests: limits, invariants over the parameter box, vmap, and gradients vs finite differences."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from peano_bayes.physics import (
+    DEFAULT_CONFIG,
+    ELASTIC_CONFIG,
+    PAPER_PROPOSED_CONFIG,
+    PARAMETERS,
+    Blocking,
+    LoadCycle,
+    ModelConfig,
+    Step,
+    Stroke,
+    metrics,
+    pouch,
+    simulate_blocking,
+    simulate_load_cycle,
+    simulate_step,
+    simulate_stroke,
+    static_strain,
+)
+
+from .helpers import central_difference
+
+#: Every element on: the configuration the NaN/inf sweep covers.
+SUPERSET = ModelConfig(mount=True, parallel_maxwell=1, series_kelvin=1, series_creep=True, friction="parallel",
+                       threshold=True, damping=True)
+
+
+def box_point(u, config):
+    """Map u in [0, 1]^d to a parameter set inside PARAMETERS' bounds (log-uniform over 4 decades at the top,
+    or the lower bound itself when it is 0 and u is small)."""
+    params = {}
+    for ui, name in zip(u, config.parameter_names(), strict=True):
+        lo, hi = PARAMETERS[name].bounds
+        if lo > 0 and hi / lo > 20:
+            params[name] = float(np.exp(np.log(lo) + ui * (np.log(hi) - np.log(lo))))
+        elif lo == 0 and hi > 0:
+            params[name] = 0.0 if ui < 0.1 else float(hi * 10 ** (-4 * (1 - (ui - 0.1) / 0.9)))
+        else:
+            params[name] = float(lo + ui * (hi - lo))
+    return params
+
+
+def nominal(config):
+    return {k: jnp.asarray(v) for k, v in config.nominal_parameters().items()}
+
+
+def cycle_protocol(start, low, pressure_pa, half_period_s=20.0, n=201):
+    t = jnp.linspace(0.0, 2 * half_period_s, n)
+    strain = jnp.interp(t, jnp.array([0.0, half_period_s, 2 * half_period_s]), jnp.array([start, low, start]))
+    return LoadCycle(t, strain, jnp.full(n, pressure_pa))
+
+
+RAMP = jnp.linspace(0.0, 1.0, 81)
+
+
+def step_protocol(supply_pa=2e5, load_n=40.0):
+    t = jnp.linspace(0.0, 0.6, 601)
+    return Step(t, jnp.where(t > 0.05, supply_pa, 0.0), load_n, 2)
+
+
+def test_ideal_free_strain_and_infinite_blocking():
+    """No bending, no tensile compliance: the free strain is 1 - 2/pi and blocking is unbounded."""
+    ideal = ModelConfig(bending=False, tensile=False, extension=False, friction="none")
+    params = nominal(ideal)
+    assert float(static_strain(params, 1e5, 0.0, config=ideal)) == pytest.approx(float(pouch.IDEAL_FREE_STRAIN),
+                                                                                 abs=1e-5)
+    force = simulate_blocking(params, Blocking(10 * RAMP, 1e5 * RAMP), config=ideal).force_n[-1]
+    assert float(force) > 1e5  # the half-angle sits at its numerical floor
+
+
+def test_finite_blocking_with_tensile_stiffness():
+    params = nominal(ELASTIC_CONFIG)
+    small_angle = simulate_blocking(params, Blocking(10 * RAMP, 2e5 * RAMP), config=ELASTIC_CONFIG)
+    assert 50.0 < float(small_angle.force_n[-1]) < 1e3
+    stiffer = dict(params, tensile_ka_n_per_m=jnp.asarray(4e4))
+    assert float(simulate_blocking(stiffer, Blocking(10 * RAMP, 2e5 * RAMP), config=ELASTIC_CONFIG).force_n[-1]) \
+        > float(small_angle.force_n[-1])
+
+
+def test_bending_lowers_free_strain_most_at_low_pressure():
+    params = nominal(ELASTIC_CONFIG)
+    no_bending = ModelConfig(bending=False, friction="none", extension=False)
+    loss = [float(static_strain({k: params[k] for k in no_bending.parameter_names()}, p, 0.0, config=no_bending)
+                  - static_strain(params, p, 0.0, config=ELASTIC_CONFIG)) for p in (3e4, 2e5, 5e5)]
+    assert loss[0] > loss[1] > loss[2] > 0
+
+
+_elastic_cycle = jax.jit(lambda params, pr: simulate_load_cycle(
+    params, LoadCycle(jnp.linspace(0, 10, 41), jnp.linspace(-0.01, 0.12, 41), jnp.full(41, pr)),
+    config=ELASTIC_CONFIG).force_n)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.lists(st.floats(0, 1), min_size=len(ELASTIC_CONFIG.parameter_names()),
+                max_size=len(ELASTIC_CONFIG.parameter_names())), st.floats(1e4, 3e5))
+def test_elastic_force_rises_with_pressure_and_falls_with_contraction(u, pressure_pa):
+    params = {k: jnp.asarray(v) for k, v in box_point(u, ELASTIC_CONFIG).items()}
+    low = np.asarray(_elastic_cycle(params, pressure_pa))
+    high = np.asarray(_elastic_cycle(params, 1.5 * pressure_pa))
+    assert np.all(np.isfinite(low)) and np.all(np.isfinite(high))
+    assert np.all(high >= low - 1e-9)
+    assert np.all(np.diff(low) <= 1e-9)
+
+
+_default_cycle = jax.jit(lambda params, start, pr: simulate_load_cycle(
+    params, cycle_protocol(start, -0.012, pr), config=DEFAULT_CONFIG))
+_default_start = jax.jit(lambda params, pr, f: static_strain(params, pr, f, config=DEFAULT_CONFIG))
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.lists(st.floats(0, 1), min_size=len(DEFAULT_CONFIG.parameter_names()),
+                max_size=len(DEFAULT_CONFIG.parameter_names())), st.sampled_from([3e4, 2e5]))
+def test_hysteresis_loss_and_energy_in_range(u, pressure_pa):
+    params = {k: jnp.asarray(v) for k, v in box_point(u, DEFAULT_CONFIG).items()}
+    start = _default_start(params, pressure_pa, 10.0)
+    if float(start) < 0.0:
+        start = jnp.asarray(0.0)  # a very stiff, weak muscle: start at the unstretched length
+    result = _default_cycle(params, start, pressure_pa)
+    protocol = cycle_protocol(start, -0.012, pressure_pa)
+    strain, force = np.asarray(protocol.strain), np.asarray(result.force_n)
+    assert np.all(np.isfinite(force))
+    h = metrics.hysteresis_loss(strain, force)
+    assert 0.0 <= h < 1.0
+    assert metrics.energy_per_pressure(strain, force, np.full(len(force), pressure_pa), 0.06) >= 0.0
+
+
+def _all_tests(params, config):
+    cycle = simulate_load_cycle(params, cycle_protocol(0.05, -0.012, 2e5), config=config)
+    block = simulate_blocking(params, Blocking(10 * RAMP, 2e5 * RAMP), config=config)
+    stroke = simulate_stroke(params, Stroke(10 * RAMP, 2e5 * RAMP), config=config)
+    step = simulate_step(params, step_protocol(), config=config)
+    return cycle.force_n, block.force_n, stroke.strain, step.strain, step.pressure_pa, step.flow_m3_per_s
+
+
+def test_no_nan_or_inf_anywhere_in_the_parameter_box(rng):
+    n = 24
+    names = SUPERSET.parameter_names()
+    points = [box_point(rng.uniform(size=len(names)), SUPERSET) for _ in range(n)]
+    batch = {k: jnp.array([p[k] for p in points]) for k in names}
+    outputs = jax.jit(jax.vmap(lambda p: _all_tests(p, SUPERSET)))(batch)
+    for signal in outputs:
+        assert np.all(np.isfinite(np.asarray(signal)))
+
+
+def test_vmap_matches_single_evaluations():
+    params = nominal(DEFAULT_CONFIG)
+    batch = {k: jnp.stack([v, v * 1.1]) for k, v in params.items()}
+    protocol = cycle_protocol(0.05, -0.012, 2e5)
+    batched = jax.vmap(lambda p: simulate_load_cycle(p, protocol).force_n)(batch)
+    single = simulate_load_cycle({k: v[1] for k, v in batch.items()}, protocol).force_n
+    np.testing.assert_allclose(batched[1], single, rtol=1e-12)
+
+
+def test_solver_converges():
+    params = nominal(SUPERSET)
+    cycle = simulate_load_cycle(params, cycle_protocol(0.05, -0.012, 2e5), config=SUPERSET)
+    block = simulate_blocking(params, Blocking(10 * RAMP, 2e5 * RAMP), config=SUPERSET)
+    stroke = simulate_stroke(params, Stroke(10 * RAMP, 2e5 * RAMP), config=SUPERSET)
+    step = simulate_step(params, step_protocol(), config=SUPERSET)
+    assert float(cycle.max_residual) < 1e-10  # m
+    assert float(block.max_residual) < 1e-10  # m
+    assert float(stroke.max_residual) < 1e-8  # N
+    assert float(step.max_residual) < 1e-10  # m
+
+
+def test_friction_hysteresis_is_rate_independent_and_viscous_is_not():
+    friction = nominal(DEFAULT_CONFIG)
+    slow = cycle_protocol(0.08, -0.012, 2e5, half_period_s=200.0)
+    fast = cycle_protocol(0.08, -0.012, 2e5, half_period_s=2.0)
+
+    def loss(config, params, protocol):
+        force = simulate_load_cycle(params, protocol, config=config).force_n
+        return metrics.hysteresis_loss(np.asarray(protocol.strain), np.asarray(force))
+
+    assert loss(DEFAULT_CONFIG, friction, slow) == pytest.approx(loss(DEFAULT_CONFIG, friction, fast), rel=1e-6)
+    visco = nominal(PAPER_PROPOSED_CONFIG)
+    assert loss(PAPER_PROPOSED_CONFIG, visco, fast) > 1.5 * loss(PAPER_PROPOSED_CONFIG, visco, slow) > 0
+
+
+def test_step_response_lifts_the_load_and_settles():
+    params = nominal(DEFAULT_CONFIG)
+    result = simulate_step(params, step_protocol())
+    settled = float(static_strain(params, 2e5, 40.0))
+    assert float(result.strain[0]) < 0.0  # hanging load stretches the deflated muscle
+    assert float(jnp.max(result.strain)) > settled  # overshoot
+    assert float(jnp.mean(result.strain[-50:])) == pytest.approx(settled, abs=0.01)
+    assert float(result.pressure_pa[-1]) == pytest.approx(2e5, rel=0.05)
+
+
+# --- gradients of every simulation against finite differences -------------------------------------------
+
+
+def _weights(n, seed):
+    return jnp.asarray(np.random.default_rng(seed).uniform(0.5, 1.5, n))
+
+
+SIMULATIONS = {
+    "load_cycle": (SUPERSET, lambda p: jnp.sum(_weights(201, 1) * simulate_load_cycle(
+        p, cycle_protocol(0.05, -0.012, 2e5, half_period_s=4.0), config=SUPERSET).force_n)),
+    "blocking": (SUPERSET, lambda p: jnp.sum(_weights(81, 2) * simulate_blocking(
+        p, Blocking(10 * RAMP, 2e5 * RAMP), config=SUPERSET).force_n)),
+    "stroke": (SUPERSET, lambda p: jnp.sum(_weights(81, 3) * simulate_stroke(
+        p, Stroke(10 * RAMP, 2e5 * RAMP), config=SUPERSET).strain)),
+    "step": (SUPERSET, lambda p: jnp.sum(_weights(601, 4) * simulate_step(
+        p, step_protocol(), config=SUPERSET).strain)),
+    "step_laminar": (ModelConfig(flow="laminar"), lambda p: jnp.sum(_weights(601, 5) * simulate_step(
+        p, step_protocol(), config=ModelConfig(flow="laminar")).strain)),
+}
+
+
+@pytest.mark.parametrize("name", list(SIMULATIONS))
+def test_simulation_gradients_match_finite_differences(name):
+    config, objective = SIMULATIONS[name]
+    params = config.nominal_parameters()
+    params.update(damping_up_ns_per_m=30.0, damping_down_ns_per_m=20.0, damping_quadratic_ns2_per_m2=5.0)
+    params = {k: v for k, v in params.items() if k in config.parameter_names()}
+    value = jax.jit(objective)
+    grads = jax.jit(jax.grad(objective))({k: jnp.asarray(v) for k, v in params.items()})
+    for key in config.parameter_names():
+        fd = central_difference(value, params, key, rel_step=1e-5)
+        scale = max(abs(fd), 1e-6 * abs(float(value(params))) / max(abs(params[key]), 1e-12))
+        assert abs(float(grads[key]) - fd) <= 1e-5 * scale, (key, float(grads[key]), fd)
