@@ -26,7 +26,18 @@ from .physics import (  # noqa: E402
 
 __version__ = "0.1.0"
 __all__ = [
-    "DEFAULT_CONFIG", "PAPER_GEOMETRY", "PAPER_PROPOSED_CONFIG", "Blocking", "Geometry", "LoadCycle",
-    "ModelConfig", "Step", "Stroke", "simulate_blocking", "simulate_load_cycle", "simulate_step",
-    "simulate_stroke", "static_strain",
+    "DEFAULT_CONFIG",
+    "PAPER_GEOMETRY",
+    "PAPER_PROPOSED_CONFIG",
+    "Blocking",
+    "Geometry",
+    "LoadCycle",
+    "ModelConfig",
+    "Step",
+    "Stroke",
+    "simulate_blocking",
+    "simulate_load_cycle",
+    "simulate_step",
+    "simulate_stroke",
+    "static_strain",
 ]

@@ -8,8 +8,9 @@ import jax.numpy as jnp
 from .physics import DEFAULT_CONFIG, PAPER_GEOMETRY, Blocking, ModelConfig, simulate_blocking, static_strain
 
 
-def blocking_and_free_strain(pressures_kpa, *, config: ModelConfig = DEFAULT_CONFIG, params=None,
-                             geometry=PAPER_GEOMETRY):
+def blocking_and_free_strain(
+    pressures_kpa, *, config: ModelConfig = DEFAULT_CONFIG, params=None, geometry=PAPER_GEOMETRY
+):
     """Blocking force [N] and free strain [-] at each pressure [kPa], nominal parameters unless given.
 
     Blocking: the muscle held at zero strain along a 0 -> p ramp; free strain: equilibrium strain at zero force.
@@ -20,11 +21,15 @@ def blocking_and_free_strain(pressures_kpa, *, config: ModelConfig = DEFAULT_CON
 
     @jax.jit
     def one(p_pa):
-        force = simulate_blocking(params, Blocking(10.0 * ramp, p_pa * ramp), config=config, geometry=geometry)
+        force = simulate_blocking(
+            params, Blocking(10.0 * ramp, p_pa * ramp), config=config, geometry=geometry
+        )
         return force.force_n[-1], static_strain(params, p_pa, 0.0, config=config, geometry=geometry)
 
     rows = []
     for p_kpa in pressures_kpa:
         force, eps = one(jnp.asarray(1e3 * float(p_kpa)))
-        rows.append({"pressure_kpa": float(p_kpa), "blocking_force_n": float(force), "free_strain": float(eps)})
+        rows.append(
+            {"pressure_kpa": float(p_kpa), "blocking_force_n": float(force), "free_strain": float(eps)}
+        )
     return rows

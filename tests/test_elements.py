@@ -84,8 +84,13 @@ def test_kelvin_creep_is_exact():
 
 
 def _dahl_cycle(n_steps, amplitude=1e-3, k=2e4, limit=2.0):
-    x = np.concatenate([np.linspace(0, amplitude, n_steps), np.linspace(amplitude, -amplitude, 2 * n_steps),
-                        np.linspace(-amplitude, amplitude, 2 * n_steps)])
+    x = np.concatenate(
+        [
+            np.linspace(0, amplitude, n_steps),
+            np.linspace(amplitude, -amplitude, 2 * n_steps),
+            np.linspace(-amplitude, amplitude, 2 * n_steps),
+        ]
+    )
     f, forces = 0.0, []
     for i in range(1, len(x)):
         f = float(elements.dahl_update(f, x[i] - x[i - 1], k, limit))
@@ -98,8 +103,9 @@ def test_dahl_is_rate_independent_and_bounded():
     x1, f1 = _dahl_cycle(200)
     x2, f2 = _dahl_cycle(2000)
     assert np.max(np.abs(f1)) <= 2.0 and np.max(np.abs(f2)) <= 2.0
-    np.testing.assert_allclose(np.interp(0.0, x1[-400:], f1[-400:]), np.interp(0.0, x2[-4000:], f2[-4000:]),
-                               rtol=1e-3)
+    np.testing.assert_allclose(
+        np.interp(0.0, x1[-400:], f1[-400:]), np.interp(0.0, x2[-4000:], f2[-4000:]), rtol=1e-3
+    )
     assert float(elements.dahl_update(1.3, 0.0, 2e4, 2.0)) == pytest.approx(1.3, rel=1e-15)  # no creep
 
 
@@ -112,7 +118,10 @@ def test_effective_pressure():
 
 # Every element, differentiated w.r.t. every argument it has, against central differences.
 ELEMENT_CASES = [
-    (elements.bending_force, dict(theta=0.6, k1_n=0.5, k2_n=10.0, exponent=6.0, width_m=0.015, length_m=0.0495)),
+    (
+        elements.bending_force,
+        dict(theta=0.6, k1_n=0.5, k2_n=10.0, exponent=6.0, width_m=0.015, length_m=0.0495),
+    ),
     (elements.tensile_stretch, dict(force_n=40.0, ka_n_per_m=2e4, kb_n_per_m2=1e7)),
     (elements.extension_force, dict(strain=-0.012, k_n_per_m=1e3, rate=50.0, l0_m=0.06)),
     (elements.maxwell_update, dict(q_n=1.5, dx_m=2e-4, dt_s=0.05, k_n_per_m=2e3, tau_s=0.8)),

@@ -49,7 +49,7 @@ class Range:
 
 
 def _num(x: float) -> str:
-    return f"{x:g}"
+    return f"{x:g}".replace("e+0", "e").replace("e+", "e")
 
 
 @dataclass(frozen=True)
@@ -98,7 +98,7 @@ COLUMNS: tuple[Column, ...] = (
     Column("test", "text", "-", "test", "-", 0, None, True, _ALL,
            "the rig test: " + ", ".join(f"`{t}`" for t in TESTS)),
     Column("run", "int", "-", "run", "-", 0, Range(0), True, _ALL,
-           "repeat index within specimen and test (the paper ran three), a whole number >= 0"),
+           "repeat index within specimen and test (the paper ran three)"),
     Column("time_s", "float", "s", "time_s", "s", 0, Range(0.0, 1e6), True, _ALL,
            "time since the start of the run, strictly increasing within a run"),
     Column("pressure_kpa", "float", "kPa", "pressure_pa", "Pa", 3, Range(-10.0, 2000.0), True, _ALL,
@@ -207,7 +207,7 @@ def markdown_tables() -> str:
     for c in COLUMNS:
         need = "every test" if c.needed_by == _ALL else ", ".join(f"`{t}`" for t in TESTS if t in c.needed_by)
         header = "required" if c.in_header else "optional"
-        valid = c.range if c.range is not None else "non-empty"
+        valid = c.range if c.range is not None else ("a test below" if c.name == "test" else "non-empty")
         cells = (f"`{c.name}`", c.kind, c.unit, header, need or "-", valid, c.meaning)
         lines.append("| " + " | ".join(map(str, cells)) + " |")
     lines += ["", "| test | what the rig does | cells that must be filled |", "|---|---|---|"]
@@ -224,7 +224,3 @@ def markdown_tables() -> str:
         cells = (f"`[{k.section}]`", f"`{k.name}`", k.kind, k.unit, required, valid, k.meaning)
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
-
-
-if __name__ == "__main__":  # pragma: no cover - regenerates the tables of docs/data-format.md
-    print(markdown_tables(), end="")

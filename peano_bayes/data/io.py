@@ -248,7 +248,6 @@ def _parse_rows(
 )  -> tuple[Run, ...]:
     n_fields = len(names)
     test_index = names.index("test")
-    run_index = names.index("run")
     cells = [(i, c) for i, c in enumerate(columns) if c.name != "test"]
     float_columns = [c.name for c in columns if c.kind == "float"]
     runs: dict[tuple[str, str, int], _RunRows] = {}
@@ -330,7 +329,7 @@ def _parse_rows(
                 f"run {_run_label(key)} has too few samples",
                 file=name,
                 row=acc.first_row,
-                column=names[run_index],
+                column="run",
                 value=len(acc.times),
                 expected=f"at least {MIN_SAMPLES_PER_RUN} samples per run",
             )

@@ -27,8 +27,24 @@ from .simulate import (
 )
 
 __all__ = [
-    "DEFAULT_CONFIG", "ELASTIC_CONFIG", "PAPER_PROPOSED_CONFIG", "PARAMETERS", "PAPER_GEOMETRY",
-    "VALIDATION_GEOMETRY", "Blocking", "Geometry", "LoadCycle", "ModelConfig", "Step", "Stroke", "elements",
-    "metrics", "pouch", "simulate_blocking", "simulate_load_cycle", "simulate_step", "simulate_stroke",
+    "DEFAULT_CONFIG",
+    "ELASTIC_CONFIG",
+    "PAPER_PROPOSED_CONFIG",
+    "PARAMETERS",
+    "PAPER_GEOMETRY",
+    "VALIDATION_GEOMETRY",
+    "Blocking",
+    "Geometry",
+    "LoadCycle",
+    "ModelConfig",
+    "Step",
+    "Stroke",
+    "elements",
+    "metrics",
+    "pouch",
+    "simulate_blocking",
+    "simulate_load_cycle",
+    "simulate_step",
+    "simulate_stroke",
     "static_strain",
 ]

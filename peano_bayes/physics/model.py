@@ -49,25 +49,57 @@ class Parameter:
 
 
 PARAMETERS: dict[str, Parameter] = {
-    "length_fraction": Parameter("-", "effective fraction of the tube length that the pressure acts on", 0.8, (0.3, 1.0)),
-    "bending_k1_n": Parameter("N", "bending stiffness, constant part (energy l k1 theta^2/2)", 0.5, (0.0, 50.0), 0.0),
-    "bending_k2_n": Parameter("N", "bending stiffness, stiffening part (k2 theta^m)", 10.0, (0.0, 500.0), 0.0),
+    "length_fraction": Parameter(
+        "-", "effective fraction of the tube length that the pressure acts on", 0.8, (0.3, 1.0)
+    ),
+    "bending_k1_n": Parameter(
+        "N", "bending stiffness, constant part (energy l k1 theta^2/2)", 0.5, (0.0, 50.0), 0.0
+    ),
+    "bending_k2_n": Parameter(
+        "N", "bending stiffness, stiffening part (k2 theta^m)", 10.0, (0.0, 500.0), 0.0
+    ),
     "bending_exponent": Parameter("-", "exponent m of the stiffening bending part", 6.0, (1.0, 12.0)),
-    "tensile_ka_n_per_m": Parameter("N/m", "series tensile stiffness at zero load (muscle level)", 2e4, (1e2, 1e6)),
-    "tensile_kb_n_per_m2": Parameter("N/m^2", "series tensile stiffening, F = ka d + kb d^2", 1e7, (0.0, 1e10), 0.0),
-    "extension_k_n_per_m": Parameter("N/m", "passive extension stiffness at zero strain (0 kPa)", 1e3, (0.0, 1e5), 0.0),
-    "extension_rate": Parameter("-", "exponential stiffening rate of passive extension per unit strain", 50.0, (0.0, 200.0)),
-    "mount_compliance_m_per_n": Parameter("m/N", "compliance of the mount tabs in series", 1e-5, (0.0, 1e-3), 0.0),
-    "series_creep_c_ns_per_m": Parameter("N s/m", "Burgers series dashpot (unbounded creep)", 1e7, (1e4, 1e12), 1e12),
+    "tensile_ka_n_per_m": Parameter(
+        "N/m", "series tensile stiffness at zero load (muscle level)", 2e4, (1e2, 1e6)
+    ),
+    "tensile_kb_n_per_m2": Parameter(
+        "N/m^2", "series tensile stiffening, F = ka d + kb d^2", 1e7, (0.0, 1e10), 0.0
+    ),
+    "extension_k_n_per_m": Parameter(
+        "N/m", "passive extension stiffness at zero strain (0 kPa)", 1e3, (0.0, 1e5), 0.0
+    ),
+    "extension_rate": Parameter(
+        "-", "exponential stiffening rate of passive extension per unit strain", 50.0, (0.0, 200.0)
+    ),
+    "mount_compliance_m_per_n": Parameter(
+        "m/N", "compliance of the mount tabs in series", 1e-5, (0.0, 1e-3), 0.0
+    ),
+    "series_creep_c_ns_per_m": Parameter(
+        "N s/m", "Burgers series dashpot (unbounded creep)", 1e7, (1e4, 1e12), 1e12
+    ),
     "friction_stiffness_n_per_m": Parameter("N/m", "Dahl friction pre-sliding stiffness", 2e4, (1e2, 1e6)),
     "friction_force_n": Parameter("N", "Dahl friction force limit, constant part", 0.5, (0.0, 50.0), 0.0),
-    "friction_load_fraction": Parameter("-", "Dahl friction limit per unit contractile force", 0.1, (0.0, 0.5), 0.0),
-    "threshold_pressure_pa": Parameter("Pa", "pressure below which the tubes do not open", 5e3, (0.0, 5e4), 0.0),
-    "orifice_area_m2": Parameter("m^2", "effective discharge area C_d A of the inlet restriction", 5e-6, (1e-7, 1e-4)),
-    "laminar_conductance_m3_per_s_pa": Parameter("m^3/(s Pa)", "laminar channel conductance", 1e-9, (1e-12, 1e-7)),
+    "friction_pressure_fraction": Parameter(
+        "-",
+        "Dahl friction limit per unit pressure load p w l_e (walls pressed together)",
+        0.1,
+        (0.0, 0.5),
+        0.0,
+    ),
+    "threshold_pressure_pa": Parameter(
+        "Pa", "pressure below which the tubes do not open", 5e3, (0.0, 5e4), 0.0
+    ),
+    "orifice_area_m2": Parameter(
+        "m^2", "effective discharge area C_d A of the inlet restriction", 5e-6, (1e-7, 1e-4)
+    ),
+    "laminar_conductance_m3_per_s_pa": Parameter(
+        "m^3/(s Pa)", "laminar channel conductance", 1e-9, (1e-12, 1e-7)
+    ),
     "damping_up_ns_per_m": Parameter("N s/m", "load damping while contracting", 0.0, (0.0, 1e4), 0.0),
     "damping_down_ns_per_m": Parameter("N s/m", "load damping while extending", 0.0, (0.0, 1e4), 0.0),
-    "damping_quadratic_ns2_per_m2": Parameter("N s^2/m^2", "quadratic load damping c |v| v", 0.0, (0.0, 1e4), 0.0),
+    "damping_quadratic_ns2_per_m2": Parameter(
+        "N s^2/m^2", "quadratic load damping c |v| v", 0.0, (0.0, 1e4), 0.0
+    ),
 }
 
 
@@ -78,7 +110,9 @@ def _indexed(prefix: str, count: int, suffixes: dict[str, Parameter]) -> None:
 
 
 _MAXWELL = {
-    "k_n_per_m": Parameter("N/m", "Maxwell branch stiffness across the contractile unit", 2e3, (0.0, 1e5), 0.0),
+    "k_n_per_m": Parameter(
+        "N/m", "Maxwell branch stiffness across the contractile unit", 2e3, (0.0, 1e5), 0.0
+    ),
     "tau_s": Parameter("s", "Maxwell branch relaxation time", 1.0, (1e-3, 1e3)),
 }
 _KELVIN = {
@@ -120,7 +154,9 @@ class ModelConfig(eqx.Module):
 
     def __check_init__(self):
         if self.friction not in ("none", "parallel", "whole"):
-            raise ValueError(f"ModelConfig.friction must be 'none', 'parallel' or 'whole', got {self.friction!r}")
+            raise ValueError(
+                f"ModelConfig.friction must be 'none', 'parallel' or 'whole', got {self.friction!r}"
+            )
         if self.flow not in ("orifice", "laminar"):
             raise ValueError(f"ModelConfig.flow must be 'orifice' or 'laminar', got {self.flow!r}")
         for name in ("parallel_maxwell", "series_kelvin"):
@@ -145,7 +181,7 @@ class ModelConfig(eqx.Module):
         if self.series_creep:
             names += ["series_creep_c_ns_per_m"]
         if self.friction != "none":
-            names += ["friction_stiffness_n_per_m", "friction_force_n", "friction_load_fraction"]
+            names += ["friction_stiffness_n_per_m", "friction_force_n", "friction_pressure_fraction"]
         if self.threshold:
             names += ["threshold_pressure_pa"]
         names += ["orifice_area_m2"] if self.flow == "orifice" else ["laminar_conductance_m3_per_s_pa"]
@@ -212,22 +248,42 @@ class Chain(NamedTuple):
 
     force_n: jnp.ndarray
     shortening_m: jnp.ndarray
+    friction_limit_n: jnp.ndarray
     state: MuscleState
 
 
-def chain(theta, pressure_pa, dt_s, state: MuscleState, params, config: ModelConfig, geometry: Geometry) -> Chain:
+def chain(
+    theta,
+    pressure_pa,
+    dt_s,
+    state: MuscleState,
+    params,
+    config: ModelConfig,
+    geometry: Geometry,
+    relaxed: bool = False,
+) -> Chain:
     """Contractile unit with its parallel elements, in series with the series elements.
 
     ``theta`` [rad] is the tube half-angle, ``pressure_pa`` the gauge pressure in the tubes, ``dt_s`` the time
     since ``state``. The chain force is a decreasing and its shortening an increasing function of ``theta``.
+    ``relaxed=True`` gives the state after a long hold (``state`` and ``dt_s`` are ignored): Maxwell branches
+    and friction unloaded, Kelvin units fully crept; every test starts from it.
     """
     w, l = geometry.tube_width_m, geometry.tube_length_m
     threshold = params["threshold_pressure_pa"] if config.threshold else 0.0
     p_eff = elements.effective_pressure(pressure_pa, threshold, PRESSURE_FLOOR_PA)
 
     x = contraction_m(theta, geometry)
+    if relaxed:
+        state = initial_state(config)._replace(contraction_m=x)
     dx = x - state.contraction_m
-    active = p_eff * pouch.force_per_pressure(theta, w, params["length_fraction"] * l)
+    l_e = params["length_fraction"] * l
+    active = p_eff * pouch.force_per_pressure(theta, w, l_e)
+    # Friction limit: constant part plus a part set by the pressure load pressing the walls together. It is
+    # constant at constant pressure, which keeps the element passive (loops never gain energy).
+    friction_limit = params.get("friction_force_n", 0.0) + params.get("friction_pressure_fraction", 0.0) * (
+        p_eff * w * l_e
+    )
     force = active
     if config.bending:
         force = force - elements.bending_force(
@@ -240,7 +296,7 @@ def chain(theta, pressure_pa, dt_s, state: MuscleState, params, config: ModelCon
         force = force - jnp.sum(maxwell)
     friction = state.friction_n
     if config.friction == "parallel":
-        limit = params["friction_force_n"] + params["friction_load_fraction"] * active
+        limit = params["friction_force_n"] + params["friction_pressure_fraction"] * active
         friction = elements.dahl_update(state.friction_n, dx, params["friction_stiffness_n_per_m"], limit)
         force = force - friction
 
@@ -252,19 +308,26 @@ def chain(theta, pressure_pa, dt_s, state: MuscleState, params, config: ModelCon
     kelvin = state.kelvin_m
     if config.series_kelvin:
         k, tau = _branches(params, "series_kelvin", config.series_kelvin)
-        kelvin = elements.kelvin_update(state.kelvin_m, state.chain_force_n, force, dt_s, k, tau)
+        if relaxed:
+            kelvin = force / k
+        else:
+            kelvin = elements.kelvin_update(state.kelvin_m, state.chain_force_n, force, dt_s, k, tau)
         stretch = stretch + jnp.sum(kelvin)
     creep = state.creep_m
-    if config.series_creep:
+    if config.series_creep and not relaxed:
         creep = elements.creep_update(
             state.creep_m, state.chain_force_n, force, dt_s, params["series_creep_c_ns_per_m"]
         )
         stretch = stretch + creep
     new_state = state._replace(
-        contraction_m=x, chain_force_n=force, maxwell_n=maxwell, kelvin_m=kelvin, creep_m=creep,
+        contraction_m=x,
+        chain_force_n=force,
+        maxwell_n=maxwell,
+        kelvin_m=kelvin,
+        creep_m=creep,
         friction_n=friction if config.friction == "parallel" else state.friction_n,
     )
-    return Chain(force, x - stretch, new_state)
+    return Chain(force, x - stretch, friction_limit, new_state)
 
 
 def total_force(strain, link: Chain, params, config: ModelConfig, geometry: Geometry):
@@ -280,7 +343,7 @@ def total_force(strain, link: Chain, params, config: ModelConfig, geometry: Geom
             strain, params["extension_k_n_per_m"], params["extension_rate"], l0
         )
     if config.friction == "whole":
-        limit = params["friction_force_n"] + params["friction_load_fraction"] * jnp.abs(link.force_n)
+        limit = params["friction_force_n"] + params["friction_pressure_fraction"] * jnp.abs(link.force_n)
         dy = (strain - state.strain) * l0  # friction opposes the motion of the load
         friction = elements.dahl_update(state.friction_n, dy, params["friction_stiffness_n_per_m"], limit)
         total = total - friction

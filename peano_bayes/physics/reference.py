@@ -24,6 +24,7 @@ from typing import Literal, NamedTuple
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import lineax as lx
 import optimistix as optx
 
 __all__ = [
@@ -60,6 +61,12 @@ def _map_scalar(fn, *arrays):
     shape = arrays[0].shape
     out = jax.vmap(fn)(*[a.reshape(-1) for a in arrays])
     return out.reshape(shape)
+
+
+# Scalar root finds: a 1x1 Jacobian is diagonal, which lets lineax skip its general (slow to compile) solvers
+# in the Newton step and in the implicit adjoint.
+_SCALAR_TAGS = frozenset({lx.diagonal_tag})
+_SCALAR_ADJOINT = optx.ImplicitAdjoint(linear_solver=lx.Diagonal())
 
 
 def _solution_or_nan(sol):
@@ -134,11 +141,13 @@ def _sarosi_root_scalar(a, p, target):
 
     sol = optx.root_find(
         residual,
-        optx.Newton(rtol=1e-12, atol=1e-13),
+        optx.Newton(rtol=1e-12, atol=1e-13, linear_solver=lx.Diagonal()),
         jnp.zeros_like(p),
         args=(a, p, target, scale),
         max_steps=100,
+        adjoint=_SCALAR_ADJOINT,
         throw=False,
+        tags=_SCALAR_TAGS,
     )
     return _solution_or_nan(sol)
 
@@ -199,7 +208,10 @@ def sarosi_damping_ratio(pressure_pa, coeffs: SarosiCoefficients = SAROSI_TABLE1
     curve, integrated in closed form. ``pressure_pa`` [Pa], any shape; returns the same shape.
     """
     p = _as_float_array(pressure_pa)
-    eps_max = sarosi_free_strain(p, coeffs, "lower")
+    return _damping_ratio_given_free_strain(coeffs, p, sarosi_free_strain(p, coeffs, "lower"), strain_min)
+
+
+def _damping_ratio_given_free_strain(coeffs: SarosiCoefficients, p, eps_max, strain_min=0.0):
     u_upper = _sarosi_integral(coeffs.upper, p, strain_min, eps_max)
     u_lower = _sarosi_integral(coeffs.lower, p, strain_min, eps_max)
     return (u_upper - u_lower) / u_upper
@@ -252,7 +264,15 @@ def simulate_sarosi_step(
     # Pressure at every RK4 stage: interval i, fractions 0, 1/(2S), ..., 1 of the interval.
     frac = jnp.linspace(0.0, 1.0, n_stage)
     p_stage = p[:-1, None] + frac[None, :] * (p[1:] - p[:-1])[:, None]
-    zeta_stage = sarosi_damping_ratio(p_stage, coeffs)
+    # One batched root solve (one compiled solver): the lower-curve free strain at every stage pressure
+    # (for zeta) and, last, the initial equilibrium F_u(p_0, eps_0) = m g.
+    a_batch = jnp.concatenate(
+        [jnp.broadcast_to(coeffs.lower, (p_stage.size, 6)), coeffs.upper[None, :]], axis=0
+    )
+    p_batch = jnp.concatenate([p_stage.reshape(-1), p[:1]])
+    target = jnp.concatenate([jnp.zeros(p_stage.size), jnp.broadcast_to(load, (1,))])
+    roots = jax.vmap(_sarosi_root_scalar)(a_batch, p_batch, target)
+    zeta_stage = _damping_ratio_given_free_strain(coeffs, p_stage, roots[:-1].reshape(p_stage.shape))
     f_stage = jnp.stack([p_stage, zeta_stage], axis=-1)  # (n-1, 2S+1, 2)
     dt_sub = (t[1:] - t[:-1]) / substeps
 
@@ -281,7 +301,7 @@ def simulate_sarosi_step(
         new = jax.lax.fori_loop(0, substeps, substep, state)
         return new, new
 
-    eps0 = sarosi_equilibrium_strain(p[0], load, coeffs, "upper")
+    eps0 = roots[-1]
     y0 = jnp.stack([eps0, jnp.zeros_like(eps0)])
     _, ys = jax.lax.scan(interval, y0, (f_stage, dt_sub))
     ys = jnp.concatenate([y0[None, :], ys], axis=0)
@@ -368,7 +388,9 @@ def _veale_linkage_root(params: VealeParameters, p, other_force):
         args=(p, scale),
         options={"lower": 0.0, "upper": 1.0},
         max_steps=256,
+        adjoint=_SCALAR_ADJOINT,
         throw=False,
+        tags=_SCALAR_TAGS,
     )
     return _solution_or_nan(sol)
 

@@ -2,9 +2,10 @@
 
 Every function is ``jit``-, ``vmap``- and ``grad``-able in ``params`` (a dict of named scalars, see
 :data:`peano_bayes.physics.model.PARAMETERS`). Each time step solves one monotone scalar equation for the tube
-half-angle: the first sample by bisection (``optimistix``), later ones by Newton warm-started from the previous
-sample, with implicit-function gradients (``jax.lax.custom_root``). Each result carries ``max_residual``, the
-largest equilibrium error left by the solver, so callers can check convergence.
+half-angle: bisection (``optimistix``) to 1e-3 in log(theta), then Newton, with implicit-function gradients
+(``jax.lax.custom_root``). A warm start alone fails in corners of the parameter box (very stiff stiffening
+springs, pressure ramps from 0 kPa where the half-angle changes by decades), hence the bracket at every sample.
+Each result carries ``max_residual``, the largest equilibrium error left by the solver.
 """
 
 from __future__ import annotations
@@ -121,14 +122,23 @@ def _bisection(residual, atol: float, increasing: bool):
     an ideal muscle with no bending reaches its free strain only at theta = pi/2.
     """
     sol = optx.root_find(
-        lambda z, _: residual(z), optx.Bisection(rtol=0.0, atol=atol, flip=not increasing), jnp.asarray(0.0),
-        options=dict(lower=_LOG_THETA[0], upper=_LOG_THETA[1]), max_steps=256, throw=False,
+        lambda z, _: residual(z),
+        optx.Bisection(rtol=0.0, atol=atol, flip=not increasing),
+        jnp.asarray(0.0),
+        options=dict(lower=_LOG_THETA[0], upper=_LOG_THETA[1]),
+        max_steps=256,
+        throw=False,
     )
     return sol.value
 
 
-def _solve_log_theta(residual, z_guess=None, iterations: int = QUASI_STATIC_ITERATIONS, bracket_atol=None,
-                     increasing: bool = True):
+def _solve_log_theta(
+    residual,
+    z_guess=None,
+    iterations: int = QUASI_STATIC_ITERATIONS,
+    bracket_atol=None,
+    increasing: bool = True,
+):
     """Root of a monotone ``residual(log theta)``, with implicit-function gradients.
 
     Newton from ``z_guess`` (a warm start), or, with ``bracket_atol``, from a bisection over the whole range
@@ -145,40 +155,54 @@ def _bracketed_log_theta(residual, increasing: bool):
     return _solve_log_theta(residual, iterations=4, bracket_atol=1e-3, increasing=increasing)
 
 
-def _strain_residual(strain, pressure_pa, dt_s, state, params, config, geometry):
+def _strain_residual(strain, pressure_pa, dt_s, state, params, config, geometry, relaxed=False):
     l0 = geometry.flat_length_m
-    return lambda z: chain(jnp.exp(z), pressure_pa, dt_s, state, params, config, geometry).shortening_m - strain * l0
 
-
-def _force_residual(load_n, pressure_pa, dt_s, state, params, config, geometry):
     def residual(z):
-        link = chain(jnp.exp(z), pressure_pa, dt_s, state, params, config, geometry)
-        return total_force(link.shortening_m / geometry.flat_length_m, link, params, config, geometry)[0] - load_n
+        link = chain(jnp.exp(z), pressure_pa, dt_s, state, params, config, geometry, relaxed)
+        return link.shortening_m - strain * l0
 
     return residual
 
 
-def static_strain(params, pressure_pa, force_n, *, config: ModelConfig = DEFAULT_CONFIG,
-                  geometry: Geometry = PAPER_GEOMETRY):
+def _force_residual(load_n, pressure_pa, dt_s, state, params, config, geometry, relaxed=False):
+    def residual(z):
+        link = chain(jnp.exp(z), pressure_pa, dt_s, state, params, config, geometry, relaxed)
+        return (
+            total_force(link.shortening_m / geometry.flat_length_m, link, params, config, geometry)[0]
+            - load_n
+        )
+
+    return residual
+
+
+def _relaxed_start(residual_fn, target, pressure_pa, params, config, geometry, increasing):
+    """Solve the first sample from the relaxed state; returns (log theta, chain, state)."""
+    state = initial_state(config)
+    z = _bracketed_log_theta(
+        residual_fn(target, pressure_pa, 1.0, state, params, config, geometry, True), increasing
+    )
+    link = chain(jnp.exp(z), pressure_pa, 1.0, state, params, config, geometry, relaxed=True)
+    return z, link
+
+
+def static_strain(
+    params, pressure_pa, force_n, *, config: ModelConfig = DEFAULT_CONFIG, geometry: Geometry = PAPER_GEOMETRY
+):
     """Equilibrium strain [-] of a relaxed muscle (no history) at ``pressure_pa`` [Pa] under tension ``force_n`` [N].
 
     Used to place the start of a load cycle at the start tension, and for the free strain (``force_n = 0``).
     """
-    state = initial_state(config)
-    z = _bracketed_log_theta(_force_residual(force_n, pressure_pa, 1.0, state, params, config, geometry), False)
-    link = chain(jnp.exp(z), pressure_pa, 1.0, state, params, config, geometry)
+    _, link = _relaxed_start(
+        _force_residual, force_n, pressure_pa, params, config, geometry, increasing=False
+    )
     return link.shortening_m / geometry.flat_length_m
 
 
-def _first_theta_at_strain(strain, pressure_pa, params, config, geometry):
-    state = initial_state(config)
-    return _bracketed_log_theta(_strain_residual(strain, pressure_pa, 1.0, state, params, config, geometry), True)
-
-
-def _strain_controlled(params, time_s, strain, pressure_pa, config, geometry, bracket_atol=None) -> ForceResult:
-    state0 = initial_state(config)
-    z0 = _first_theta_at_strain(strain[0], pressure_pa[0], params, config, geometry)
-    link0 = chain(jnp.exp(z0), pressure_pa[0], 1.0, state0, params, config, geometry)
+def _strain_controlled(
+    params, time_s, strain, pressure_pa, config, geometry, bracket_atol=1e-3
+) -> ForceResult:
+    z0, link0 = _relaxed_start(_strain_residual, strain[0], pressure_pa[0], params, config, geometry, True)
     force0, state0 = total_force(strain[0], link0, params, config, geometry)
     dts = jnp.diff(time_s)
 
@@ -200,34 +224,35 @@ def _strain_controlled(params, time_s, strain, pressure_pa, config, geometry, br
 # --- the four tests -----------------------------------------------------------------------------------------
 
 
-def simulate_load_cycle(params, protocol: LoadCycle, *, config: ModelConfig = DEFAULT_CONFIG,
-                        geometry: Geometry = PAPER_GEOMETRY) -> ForceResult:
+def simulate_load_cycle(
+    params, protocol: LoadCycle, *, config: ModelConfig = DEFAULT_CONFIG, geometry: Geometry = PAPER_GEOMETRY
+) -> ForceResult:
     """Load cycle: force [N] along an imposed strain history at the protocol's pressure.
 
     Hysteresis comes out of the loss elements of ``config`` (friction, Maxwell, Kelvin), not from two curves.
     """
-    return _strain_controlled(params, protocol.time_s, protocol.strain, protocol.pressure_pa, config, geometry)
+    return _strain_controlled(
+        params, protocol.time_s, protocol.strain, protocol.pressure_pa, config, geometry
+    )
 
 
-def simulate_blocking(params, protocol: Blocking, *, config: ModelConfig = DEFAULT_CONFIG,
-                      geometry: Geometry = PAPER_GEOMETRY) -> ForceResult:
+def simulate_blocking(
+    params, protocol: Blocking, *, config: ModelConfig = DEFAULT_CONFIG, geometry: Geometry = PAPER_GEOMETRY
+) -> ForceResult:
     """Blocking test: force [N] of the muscle held at its unstretched length (strain 0) along a pressure ramp."""
     strain = jnp.zeros_like(protocol.pressure_pa)
-    # The pressure ramp starts at 0 kPa, where the half-angle changes by decades: bracket every sample.
-    return _strain_controlled(params, protocol.time_s, strain, protocol.pressure_pa, config, geometry,
-                              bracket_atol=1e-3)
+    return _strain_controlled(params, protocol.time_s, strain, protocol.pressure_pa, config, geometry)
 
 
-def simulate_stroke(params, protocol: Stroke, *, config: ModelConfig = DEFAULT_CONFIG,
-                    geometry: Geometry = PAPER_GEOMETRY) -> StrokeResult:
+def simulate_stroke(
+    params, protocol: Stroke, *, config: ModelConfig = DEFAULT_CONFIG, geometry: Geometry = PAPER_GEOMETRY
+) -> StrokeResult:
     """Stroke test: strain [-] of the muscle lifting a hanging load quasi-statically along a pressure ramp."""
     l0 = geometry.flat_length_m
-    state0 = initial_state(config)
     load = protocol.load_n
-    z0 = _bracketed_log_theta(
-        _force_residual(load, protocol.pressure_pa[0], 1.0, state0, params, config, geometry), increasing=False
+    z0, link0 = _relaxed_start(
+        _force_residual, load, protocol.pressure_pa[0], params, config, geometry, False
     )
-    link0 = chain(jnp.exp(z0), protocol.pressure_pa[0], 1.0, state0, params, config, geometry)
     _, state0 = total_force(link0.shortening_m / l0, link0, params, config, geometry)
 
     def step(carry, inputs):
@@ -240,7 +265,9 @@ def simulate_stroke(params, protocol: Stroke, *, config: ModelConfig = DEFAULT_C
         force, state = total_force(strain, link, params, config, geometry)
         return (z, state), (strain, z, jnp.abs(force - load))
 
-    _, (strain, z, err) = jax.lax.scan(step, (z0, state0), (protocol.pressure_pa[1:], jnp.diff(protocol.time_s)))
+    _, (strain, z, err) = jax.lax.scan(
+        step, (z0, state0), (protocol.pressure_pa[1:], jnp.diff(protocol.time_s))
+    )
     return StrokeResult(
         jnp.concatenate([(link0.shortening_m / l0)[None], strain]),
         jnp.exp(jnp.concatenate([z0[None], z])),
@@ -261,12 +288,16 @@ def _load_damping_n(velocity, params, config: ModelConfig):
         return jnp.zeros_like(velocity)
     up = jnp.maximum(velocity, 0.0)
     down = jnp.minimum(velocity, 0.0)
-    return (params["damping_up_ns_per_m"] * up + params["damping_down_ns_per_m"] * down
-            + params["damping_quadratic_ns2_per_m2"] * jnp.abs(velocity) * velocity)
+    return (
+        params["damping_up_ns_per_m"] * up
+        + params["damping_down_ns_per_m"] * down
+        + params["damping_quadratic_ns2_per_m2"] * jnp.abs(velocity) * velocity
+    )
 
 
-def simulate_step(params, protocol: Step, *, config: ModelConfig = DEFAULT_CONFIG,
-                  geometry: Geometry = PAPER_GEOMETRY) -> StepResult:
+def simulate_step(
+    params, protocol: Step, *, config: ModelConfig = DEFAULT_CONFIG, geometry: Geometry = PAPER_GEOMETRY
+) -> StepResult:
     """Step response: the supply pressure steps, water flows through the inlet restriction into the changing
     muscle volume, and the muscle lifts the inertial load of weight ``protocol.load_n``.
 
@@ -278,10 +309,8 @@ def simulate_step(params, protocol: Step, *, config: ModelConfig = DEFAULT_CONFI
     load = protocol.load_n
     mass = load / GRAVITY_M_PER_S2
     n_sub = protocol.substeps
-    state0 = initial_state(config)
     supply0 = protocol.supply_pa[0]
-    z0 = _bracketed_log_theta(_force_residual(load, supply0, 1.0, state0, params, config, geometry), False)
-    link0 = chain(jnp.exp(z0), supply0, 1.0, state0, params, config, geometry)
+    z0, link0 = _relaxed_start(_force_residual, load, supply0, params, config, geometry, False)
     y0 = link0.shortening_m
     force0, state0 = total_force(y0 / l0, link0, params, config, geometry)
     volume0 = volume_m3(jnp.exp(z0), params, geometry)
@@ -321,11 +350,26 @@ def simulate_step(params, protocol: Step, *, config: ModelConfig = DEFAULT_CONFI
     )
     first = lambda a0, a: jnp.concatenate([jnp.asarray(a0, dtype=a.dtype)[None], a])  # noqa: E731
     return StepResult(
-        first(y0 / l0, strain), first(0.0, v), first(supply0, p), first(0.0, flow), first(force0, force), jnp.max(err)
+        first(y0 / l0, strain),
+        first(0.0, v),
+        first(supply0, p),
+        first(0.0, flow),
+        first(force0, force),
+        jnp.max(err),
     )
 
 
 __all__ = [
-    "Blocking", "ForceResult", "LoadCycle", "Step", "StepResult", "Stroke", "StrokeResult",
-    "simulate_blocking", "simulate_load_cycle", "simulate_step", "simulate_stroke", "static_strain",
+    "Blocking",
+    "ForceResult",
+    "LoadCycle",
+    "Step",
+    "StepResult",
+    "Stroke",
+    "StrokeResult",
+    "simulate_blocking",
+    "simulate_load_cycle",
+    "simulate_step",
+    "simulate_stroke",
+    "static_strain",
 ]

@@ -1,0 +1,7 @@
+"""``python -m peano_bayes``: the same command line as ``peano-bayes``."""
+
+import sys
+
+from peano_bayes.cli import main
+
+sys.exit(main())
