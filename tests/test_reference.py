@@ -30,9 +30,9 @@ VEALE_P_KPA = [30, 80, 100, 200, 300, 400, 500]
 GRID_P = np.linspace(0.0, 600 * KPA, 13)
 GRID_EPS = np.linspace(-0.05, 0.14, 20)
 CURVE_EPS = [0.0, 0.02, 0.05, 0.08, 0.10, 0.12]
+EXTENSION_EPS = [-0.05, -0.015, -0.001]
 
 simulate = jax.jit(ref.simulate_sarosi_step, static_argnames="substeps")
-EXTENSION_EPS = [-0.05, -0.015, -0.001]
 
 
 def assert_printed(measured, printed, unit):
@@ -41,10 +41,16 @@ def assert_printed(measured, printed, unit):
 
 
 def evaluate_groups(fn, groups):
-    """Call the jitted ``fn`` once on the concatenation of the named 1-D ``groups``; split its dict output."""
+    """Evaluate ``fn`` (jitted, one compile) on all named groups of inputs at once.
+
+    ``groups`` maps a name to a tuple of equal-length 1-D arrays (the arguments of ``fn``); ``fn`` returns a
+    dict of 1-D arrays. Returns ``{output key: {group name: array}}``.
+    """
     names = list(groups)
+    n_args = len(groups[names[0]])
     sizes = np.cumsum([len(groups[k][0]) for k in names])[:-1]
-    out = jax.jit(fn)(*[jnp.asarray(np.concatenate([groups[k][i] for k in names])) for i in range(2)])
+    args = [jnp.asarray(np.concatenate([groups[k][i] for k in names])) for i in range(n_args)]
+    out = jax.jit(fn)(*args)
     return {key: dict(zip(names, np.split(np.asarray(val), sizes), strict=True)) for key, val in out.items()}
 
 
@@ -61,7 +67,7 @@ def sarosi():
         "grid": GRID_P,
     }
 
-    def statics(pressure, _):
+    def statics(pressure):
         eq = ref.sarosi_equilibrium_strain(pressure, LOAD_N)
         return {
             "upper0": ref.sarosi_force(pressure, 0.0, curve="upper"),
@@ -74,7 +80,7 @@ def sarosi():
             "damping_eq": ref.sarosi_damping(pressure, eq, LOAD_N / G),
         }
 
-    return evaluate_groups(statics, {k: (v, v) for k, v in p.items()})
+    return evaluate_groups(statics, {k: (v,) for k, v in p.items()})
 
 
 @pytest.fixture(scope="module")
@@ -103,7 +109,7 @@ def veale():
 @pytest.fixture(scope="module")
 def step_response():
     """Ideal step 80 -> 500 kPa (0.1 ms rise), 42 N load, l0 = 0.06 m, 1.5 s on a 0.1 ms grid."""
-    t = jnp.arange(15001) * 1e-4
+    t = jnp.arange(15001, dtype=float) * 1e-4
     p = jnp.where(t > 0, 500 * KPA, 80 * KPA)
     return t, simulate(t, p, LOAD_N, 0.06)
 
@@ -306,8 +312,8 @@ def test_simulate_sarosi_step_gradients():
     check_gradients(response, (ref.SAROSI_TABLE1, LOAD_N))
 
 
-def test_veale_force_gradients(veale):
-    # w.r.t. the 8 parameters, pressure and strain: contracting, extended, blocking
+def test_veale_force_gradients():
+    # w.r.t. the 8 parameters, pressure and strain, contracting and extended
     points = [(ref.VEALE_TABLE2, 300 * KPA, 0.05), (ref.VEALE_TABLE2, 80 * KPA, -0.02)]
     value_and_grad = check_gradients(lambda q, p, e: ref.veale_force(p, e, q), *points)
     # p = 0, eps < 0 (flat linkage, root u = 0): F = ka d + kb d^2, d = -eps w; only ka, kb, w and eps act.
@@ -320,7 +326,8 @@ def test_veale_force_gradients(veale):
         assert abs(float(getattr(gq, field))) < 1e-12
     # muscle-level stiffness at 0 kPa, -1.5 % (l0 = 4 w = 0.06 m): 6.9e4 N/m in the notes
     assert_printed(-float(ge) / 0.06 / 1e4, 6.9, 0.1)
-    assert np.isfinite(float(gp)) and float(gp) > 0
+    # the linkage opens like u ~ p^2 from flat, so the force is stationary in pressure at p = 0
+    assert abs(float(gp)) < 1e-12
 
 
 def test_veale_blocking_force_and_free_strain_gradients():
@@ -335,7 +342,7 @@ def test_vmap_matches_broadcasting(sarosi, veale, step_response):
     pv = jnp.asarray(VEALE_P_KPA, dtype=float) * KPA
     ps = jnp.asarray(SAROSI_P_KPA, dtype=float) * KPA
     widths = jnp.array([0.015, 0.01725])
-    t = jnp.arange(15001) * 1e-4
+    t = jnp.arange(15001, dtype=float) * 1e-4
     pt = jnp.where(t > 0, 500 * KPA, 80 * KPA)
     loads = jnp.array([20.0, LOAD_N])
 

@@ -5,7 +5,7 @@ into a muscle in ``model``; ``simulate`` runs the paper's four rig tests; ``metr
 from signals; ``reference`` holds the paper's two reference models (Sarosi, Veale).
 """
 
-from . import elements, metrics, pouch
+from . import elements, metrics, pouch, reference
 from .geometry import PAPER_GEOMETRY, VALIDATION_GEOMETRY, Geometry
 from .model import (
     DEFAULT_CONFIG,

@@ -266,9 +266,7 @@ def simulate_sarosi_step(
     p_stage = p[:-1, None] + frac[None, :] * (p[1:] - p[:-1])[:, None]
     # One batched root solve (one compiled solver): the lower-curve free strain at every stage pressure
     # (for zeta) and, last, the initial equilibrium F_u(p_0, eps_0) = m g.
-    a_batch = jnp.concatenate(
-        [jnp.broadcast_to(coeffs.lower, (p_stage.size, 6)), coeffs.upper[None, :]], axis=0
-    )
+    a_batch = jnp.concatenate([jnp.broadcast_to(coeffs.lower, (p_stage.size, 6)), coeffs.upper[None, :]], axis=0)
     p_batch = jnp.concatenate([p_stage.reshape(-1), p[:1]])
     target = jnp.concatenate([jnp.zeros(p_stage.size), jnp.broadcast_to(load, (1,))])
     roots = jax.vmap(_sarosi_root_scalar)(a_batch, p_batch, target)
@@ -392,7 +390,13 @@ def _veale_linkage_root(params: VealeParameters, p, other_force):
         throw=False,
         tags=_SCALAR_TAGS,
     )
-    return _solution_or_nan(sol)
+    z = _solution_or_nan(sol)
+    # Bisection stops ~1e-14 from the root; one Newton step takes the value to round-off (the residual
+    # falls through a simple root). The step carries no gradient: derivatives come from the implicit
+    # adjoint at the root, so the polished value and its gradient stay consistent.
+    r, dr = jax.jvp(lambda zz: residual(zz, (p, scale)), (z,), (jnp.ones_like(z),))
+    step = jnp.where(dr < 0.0, r / jnp.where(dr < 0.0, dr, -1.0), 0.0)
+    return z - jax.lax.stop_gradient(jnp.clip(step, -1e-12, 1e-12))
 
 
 def _veale_force_scalar(params: VealeParameters, p, eps):
@@ -422,8 +426,9 @@ def veale_force(pressure_pa, strain, params: VealeParameters = VEALE_TABLE2):
     a compressive (negative) force, returned as is; a slack muscle carries none, so clip if needed.
 
     Solved for ``u`` by bisection (optimistix) on the balance multiplied by ``h``; gradients by the implicit
-    function theorem. Valid for p >= 0 and eps < 2 l_a/w (36 %); NaN outside. The force is not
-    differentiable in pressure at the corner p = 0, eps >= 0 (it grows like p^(2/3) there).
+    function theorem. Meant for p >= 0 and strains up to about the ideal limit 2 l_a/w (36 %); NaN where the
+    balance has no root with 0 <= u <= 2 l_a (e.g. p < 0). The force is not differentiable in pressure
+    at the corner p = 0, eps >= 0 (it grows like p^(2/3) there): its derivatives there are huge, not exact.
     ``pressure_pa`` and ``strain`` broadcast; returns their broadcast shape.
     """
     return _map_scalar(lambda p, e: _veale_force_scalar(params, p, e), pressure_pa, strain)
