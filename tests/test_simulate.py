@@ -169,7 +169,8 @@ def test_hysteresis_loss_and_energy_in_range(u, pressure_pa):
     strain, force = np.asarray(protocol.strain), np.asarray(result.force_n)
     assert np.all(np.isfinite(force))
     h = metrics.hysteresis_loss(strain, force)
-    assert 0.0 <= h < 1.0
+    # A lossless loop (friction limit 0) has h = 0 exactly; its computed value carries ~1e-12 of round-off.
+    assert -1e-9 <= h < 1.0
     assert metrics.energy_per_pressure(strain, force, np.full(len(force), pressure_pa), 0.06) >= 0.0
 
 
