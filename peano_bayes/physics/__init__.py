@@ -42,6 +42,7 @@ __all__ = [
     "elements",
     "metrics",
     "pouch",
+    "reference",
     "simulate_blocking",
     "simulate_load_cycle",
     "simulate_step",
