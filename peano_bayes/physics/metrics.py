@@ -8,8 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from .model import GRAVITY_M_PER_S2
+
 PA_PER_MPA = 1e6
-GRAVITY_M_PER_S2 = 9.81
 
 
 def _branches(strain, force_n):

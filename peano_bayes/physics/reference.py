@@ -27,6 +27,8 @@ import jax.numpy as jnp
 import lineax as lx
 import optimistix as optx
 
+from .model import GRAVITY_M_PER_S2
+
 __all__ = [
     "GRAVITY_M_PER_S2",
     "SAROSI_TABLE1",
@@ -45,8 +47,6 @@ __all__ = [
     "veale_force",
     "veale_free_strain",
 ]
-
-GRAVITY_M_PER_S2 = 9.81
 
 Curve = Literal["upper", "lower"]
 

@@ -35,6 +35,8 @@ _LOG_THETA = (float(jnp.log(THETA_MIN)), float(jnp.log(THETA_MAX)))
 #: Newton corrections per sample. Warm-started, quasi-static tests converge to ~1e-12 m in three.
 QUASI_STATIC_ITERATIONS = 3
 DYNAMIC_ITERATIONS = 5
+COLD_START_ITERATIONS = 4
+_BRACKET_ATOL = 1e-3
 
 
 # --- protocols ----------------------------------------------------------------------------------------------
@@ -132,27 +134,14 @@ def _bisection(residual, atol: float, increasing: bool):
     return sol.value
 
 
-def _solve_log_theta(
-    residual,
-    z_guess=None,
-    iterations: int = QUASI_STATIC_ITERATIONS,
-    bracket_atol=None,
-    increasing: bool = True,
-):
+def _solve_log_theta(residual, increasing: bool, iterations: int = QUASI_STATIC_ITERATIONS):
     """Root of a monotone ``residual(log theta)``, with implicit-function gradients.
 
-    Newton from ``z_guess`` (a warm start), or, with ``bracket_atol``, from a bisection over the whole range
-    narrowed to ``bracket_atol`` in log(theta): robust when the state can jump (pressure steps, cold starts).
+    Bisection over the whole range to ``_BRACKET_ATOL`` in log(theta), then ``iterations`` Newton steps.
     ``increasing`` says whether the residual rises with theta.
     """
-    if bracket_atol is not None:
-        z_guess = jax.lax.stop_gradient(_bisection(residual, bracket_atol, increasing))
+    z_guess = jax.lax.stop_gradient(_bisection(residual, _BRACKET_ATOL, increasing))
     return jax.lax.custom_root(residual, z_guess, _newton(iterations), lambda g, y: y / g(1.0))
-
-
-def _bracketed_log_theta(residual, increasing: bool):
-    """Cold-start root of a monotone ``residual(log theta)``: bisection to 1e-3, then Newton polish."""
-    return _solve_log_theta(residual, iterations=4, bracket_atol=1e-3, increasing=increasing)
 
 
 def _strain_residual(strain, pressure_pa, dt_s, state, params, config, geometry, relaxed=False):
@@ -168,19 +157,18 @@ def _strain_residual(strain, pressure_pa, dt_s, state, params, config, geometry,
 def _force_residual(load_n, pressure_pa, dt_s, state, params, config, geometry, relaxed=False):
     def residual(z):
         link = chain(jnp.exp(z), pressure_pa, dt_s, state, params, config, geometry, relaxed)
-        return (
-            total_force(link.shortening_m / geometry.flat_length_m, link, params, config, geometry)[0]
-            - load_n
-        )
+        return total_force(link.shortening_m / geometry.flat_length_m, link, params, config, geometry)[0] - load_n
 
     return residual
 
 
 def _relaxed_start(residual_fn, target, pressure_pa, params, config, geometry, increasing):
-    """Solve the first sample from the relaxed state; returns (log theta, chain, state)."""
+    """Solve the first sample from the relaxed state; returns (log theta, chain)."""
     state = initial_state(config)
-    z = _bracketed_log_theta(
-        residual_fn(target, pressure_pa, 1.0, state, params, config, geometry, True), increasing
+    z = _solve_log_theta(
+        residual_fn(target, pressure_pa, 1.0, state, params, config, geometry, True),
+        increasing,
+        COLD_START_ITERATIONS,
     )
     link = chain(jnp.exp(z), pressure_pa, 1.0, state, params, config, geometry, relaxed=True)
     return z, link
@@ -193,32 +181,24 @@ def static_strain(
 
     Used to place the start of a load cycle at the start tension, and for the free strain (``force_n = 0``).
     """
-    _, link = _relaxed_start(
-        _force_residual, force_n, pressure_pa, params, config, geometry, increasing=False
-    )
+    _, link = _relaxed_start(_force_residual, force_n, pressure_pa, params, config, geometry, increasing=False)
     return link.shortening_m / geometry.flat_length_m
 
 
-def _strain_controlled(
-    params, time_s, strain, pressure_pa, config, geometry, bracket_atol=1e-3
-) -> ForceResult:
+def _strain_controlled(params, time_s, strain, pressure_pa, config, geometry) -> ForceResult:
     z0, link0 = _relaxed_start(_strain_residual, strain[0], pressure_pa[0], params, config, geometry, True)
     force0, state0 = total_force(strain[0], link0, params, config, geometry)
     dts = jnp.diff(time_s)
 
-    def step(carry, inputs):
-        z, state = carry
+    def step(state, inputs):
         eps, p, dt = inputs
-        residual = _strain_residual(eps, p, dt, state, params, config, geometry)
-        z = _solve_log_theta(residual, z, QUASI_STATIC_ITERATIONS, bracket_atol)
+        z = _solve_log_theta(_strain_residual(eps, p, dt, state, params, config, geometry), increasing=True)
         link = chain(jnp.exp(z), p, dt, state, params, config, geometry)
         force, state = total_force(eps, link, params, config, geometry)
-        return (z, state), (force, z, jnp.abs(link.shortening_m - eps * geometry.flat_length_m))
+        return state, (force, z, jnp.abs(link.shortening_m - eps * geometry.flat_length_m))
 
-    _, (force, z, err) = jax.lax.scan(step, (z0, state0), (strain[1:], pressure_pa[1:], dts))
-    return ForceResult(
-        jnp.concatenate([force0[None], force]), jnp.exp(jnp.concatenate([z0[None], z])), jnp.max(err)
-    )
+    _, (force, z, err) = jax.lax.scan(step, state0, (strain[1:], pressure_pa[1:], dts))
+    return ForceResult(jnp.concatenate([force0[None], force]), jnp.exp(jnp.concatenate([z0[None], z])), jnp.max(err))
 
 
 # --- the four tests -----------------------------------------------------------------------------------------
@@ -231,9 +211,7 @@ def simulate_load_cycle(
 
     Hysteresis comes out of the loss elements of ``config`` (friction, Maxwell, Kelvin), not from two curves.
     """
-    return _strain_controlled(
-        params, protocol.time_s, protocol.strain, protocol.pressure_pa, config, geometry
-    )
+    return _strain_controlled(params, protocol.time_s, protocol.strain, protocol.pressure_pa, config, geometry)
 
 
 def simulate_blocking(
@@ -250,24 +228,18 @@ def simulate_stroke(
     """Stroke test: strain [-] of the muscle lifting a hanging load quasi-statically along a pressure ramp."""
     l0 = geometry.flat_length_m
     load = protocol.load_n
-    z0, link0 = _relaxed_start(
-        _force_residual, load, protocol.pressure_pa[0], params, config, geometry, False
-    )
+    z0, link0 = _relaxed_start(_force_residual, load, protocol.pressure_pa[0], params, config, geometry, False)
     _, state0 = total_force(link0.shortening_m / l0, link0, params, config, geometry)
 
-    def step(carry, inputs):
-        z, state = carry
+    def step(state, inputs):
         p, dt = inputs
-        residual = _force_residual(load, p, dt, state, params, config, geometry)
-        z = _solve_log_theta(residual, z, QUASI_STATIC_ITERATIONS, bracket_atol=1e-3, increasing=False)
+        z = _solve_log_theta(_force_residual(load, p, dt, state, params, config, geometry), increasing=False)
         link = chain(jnp.exp(z), p, dt, state, params, config, geometry)
         strain = link.shortening_m / l0
         force, state = total_force(strain, link, params, config, geometry)
-        return (z, state), (strain, z, jnp.abs(force - load))
+        return state, (strain, z, jnp.abs(force - load))
 
-    _, (strain, z, err) = jax.lax.scan(
-        step, (z0, state0), (protocol.pressure_pa[1:], jnp.diff(protocol.time_s))
-    )
+    _, (strain, z, err) = jax.lax.scan(step, state0, (protocol.pressure_pa[1:], jnp.diff(protocol.time_s)))
     return StrokeResult(
         jnp.concatenate([(link0.shortening_m / l0)[None], strain]),
         jnp.exp(jnp.concatenate([z0[None], z])),
@@ -316,7 +288,7 @@ def simulate_step(
     volume0 = volume_m3(jnp.exp(z0), params, geometry)
 
     def substep(carry, inputs):
-        z, state, y, v, volume, force = carry
+        state, y, v, volume, force = carry
         supply, dt = inputs
         v = v + dt * (force - load - _load_damping_n(v, params, config)) / mass
         y = y + dt * v
@@ -329,22 +301,22 @@ def simulate_step(
             p, _ = muscle_pressure(z_)
             return chain(jnp.exp(z_), p, dt, state, params, config, geometry).shortening_m - y
 
-        z = _solve_log_theta(residual, z, DYNAMIC_ITERATIONS, bracket_atol=1e-3)
+        z = _solve_log_theta(residual, increasing=True, iterations=DYNAMIC_ITERATIONS)
         p, flow = muscle_pressure(z)
         link = chain(jnp.exp(z), p, dt, state, params, config, geometry)
         force, state = total_force(y / l0, link, params, config, geometry)
         volume = volume_m3(jnp.exp(z), params, geometry)
         err = jnp.abs(link.shortening_m - y)
-        return (z, state, y, v, volume, force), (p, flow, err)
+        return (state, y, v, volume, force), (p, flow, err)
 
     def sample(carry, inputs):
         supply, dt = inputs
         sub_inputs = (jnp.full(n_sub, supply), jnp.full(n_sub, dt / n_sub))
         carry, (p, flow, err) = jax.lax.scan(substep, carry, sub_inputs)
-        z, state, y, v, volume, force = carry
+        _, y, v, _, force = carry
         return carry, (y / l0, v, p[-1], flow[-1], force, jnp.max(err))
 
-    carry0 = (z0, state0, y0, jnp.zeros(()), volume0, force0)
+    carry0 = (state0, y0, jnp.zeros(()), volume0, force0)
     _, (strain, v, p, flow, force, err) = jax.lax.scan(
         sample, carry0, (protocol.supply_pa[1:], jnp.diff(protocol.time_s))
     )
