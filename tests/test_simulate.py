@@ -182,12 +182,8 @@ def _all_tests(params, config):
     return cycle.force_n, block.force_n, stroke.strain, step.strain, step.pressure_pa, step.flow_m3_per_s
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="KNOWN DEFECT (issue 2, open): simulate_step goes non-finite for 6 of 24 "
-    "random points of the box (stiff corners); the other three tests are finite everywhere",
-)
 def test_no_nan_or_inf_anywhere_in_the_parameter_box(rng):
+    """Signals and their gradients stay finite at random points of the whole box (all elements on)."""
     n = 24
     names = SUPERSET.parameter_names()
     points = [box_point(rng.uniform(size=len(names)), SUPERSET) for _ in range(n)]
@@ -195,6 +191,13 @@ def test_no_nan_or_inf_anywhere_in_the_parameter_box(rng):
     outputs = jax.jit(jax.vmap(lambda p: _all_tests(p, SUPERSET)))(batch)
     for signal in outputs:
         assert np.all(np.isfinite(np.asarray(signal)))
+
+    def summary(p):
+        return sum(jnp.mean(signal) for signal in _all_tests(p, SUPERSET)[:4])
+
+    grads = jax.jit(jax.vmap(jax.grad(summary)))(batch)
+    for key, g in grads.items():
+        assert np.all(np.isfinite(np.asarray(g))), key
 
 
 def test_vmap_matches_single_evaluations():
@@ -215,7 +218,9 @@ def test_solver_converges():
     assert float(cycle.max_residual) < 1e-10  # m
     assert float(block.max_residual) < 1e-10  # m
     assert float(stroke.max_residual) < 1e-8  # N
-    assert float(step.max_residual) < 1e-10  # m
+    # Force imbalance [N]: 1e-4 N is 2.5e-6 of the 40 N load and, through the inertial stiffness m/dt^2 ~ 1.6e7 N/m,
+    # a position error near 1e-11 m.
+    assert float(step.max_residual) < 1e-4
 
 
 def test_friction_hysteresis_is_rate_independent_and_viscous_is_not():
@@ -251,70 +256,77 @@ def _weights(n, seed):
     return jnp.asarray(np.random.default_rng(seed).uniform(0.5, 1.5, n))
 
 
-SIMULATIONS = {
-    "load_cycle": (
-        SUPERSET,
-        lambda p: jnp.sum(
-            _weights(201, 1)
-            * simulate_load_cycle(
-                p, cycle_protocol(0.05, -0.012, 2e5, half_period_s=4.0), config=SUPERSET
-            ).force_n
-        ),
+QUASI_STATIC = {
+    "load_cycle": lambda p: jnp.sum(
+        _weights(201, 1)
+        * simulate_load_cycle(p, cycle_protocol(0.05, -0.012, 2e5, half_period_s=4.0), config=SUPERSET).force_n
     ),
-    "blocking": (
-        SUPERSET,
-        lambda p: jnp.sum(
-            _weights(81, 2) * simulate_blocking(p, Blocking(10 * RAMP, 2e5 * RAMP), config=SUPERSET).force_n
-        ),
+    "blocking": lambda p: jnp.sum(
+        _weights(81, 2) * simulate_blocking(p, Blocking(10 * RAMP, 2e5 * RAMP), config=SUPERSET).force_n
     ),
-    "stroke": (
-        SUPERSET,
-        lambda p: jnp.sum(
-            _weights(81, 3) * simulate_stroke(p, Stroke(10 * RAMP, 2e5 * RAMP), config=SUPERSET).strain
-        ),
-    ),
-    "step": (
-        SUPERSET,
-        lambda p: jnp.sum(_weights(601, 4) * simulate_step(p, step_protocol(), config=SUPERSET).strain),
-    ),
-    "step_laminar": (
-        ModelConfig(flow="laminar"),
-        lambda p: jnp.sum(
-            _weights(601, 5) * simulate_step(p, step_protocol(), config=ModelConfig(flow="laminar")).strain
-        ),
+    "stroke": lambda p: jnp.sum(
+        _weights(81, 3) * simulate_stroke(p, Stroke(10 * RAMP, 2e5 * RAMP), config=SUPERSET).strain
     ),
 }
 
 
-_KNOWN_GRADIENT_DEFECTS = {
-    "blocking": "one near-zero sensitivity misses the 1e-5 relative bound (2.4e-5)",
-    "step": "NaN gradient in the step simulation",
-    "step_laminar": "NaN gradient in the step simulation",
-}
-
-
-@pytest.mark.parametrize(
-    "name",
-    [
-        pytest.param(
-            n,
-            marks=pytest.mark.xfail(
-                strict=True, reason=f"KNOWN DEFECT (issue 2, open): {_KNOWN_GRADIENT_DEFECTS[n]}"
-            ),
-        )
-        if n in _KNOWN_GRADIENT_DEFECTS
-        else n
-        for n in SIMULATIONS
-    ],
-)
-def test_simulation_gradients_match_finite_differences(name):
-    config, objective = SIMULATIONS[name]
-    params = config.nominal_parameters()
+@pytest.mark.parametrize("name", list(QUASI_STATIC))
+def test_quasi_static_gradients_match_finite_differences(name):
+    """Every parameter of the superset model, one at a time (fourth-order central differences)."""
+    objective = QUASI_STATIC[name]
+    params = {k: float(v) for k, v in SUPERSET.nominal_parameters().items()}
     params.update(damping_up_ns_per_m=30.0, damping_down_ns_per_m=20.0, damping_quadratic_ns2_per_m2=5.0)
-    params = {k: v for k, v in params.items() if k in config.parameter_names()}
     value = jax.jit(objective)
     grads = jax.jit(jax.grad(objective))({k: jnp.asarray(v) for k, v in params.items()})
-    for key in config.parameter_names():
-        fd = central_difference(value, params, key, rel_step=1e-5)
-        scale = max(abs(fd), 1e-6 * abs(float(value(params))) / max(abs(params[key]), 1e-12))
+    f0 = abs(float(value(params)))
+    for key in SUPERSET.parameter_names():
+        fd = central_difference(value, params, key, rel_step=1e-4)
+        # Sensitivities below d ln f / d ln p = 1e-6 are judged on that scale: FD cannot resolve them further.
+        scale = max(abs(fd), 1e-6 * f0 / abs(params[key]))
         assert abs(float(grads[key]) - fd) <= 1e-5 * scale, (key, float(grads[key]), fd)
+
+
+# The step response is checked along random directions in log-parameter space, which exercises every component
+# of the gradient at once. Its discrete map is smooth except where the motion reverses inside a substep with a
+# kinked element present (Dahl friction, direction-dependent damping): there the objective has curvature on the
+# nanometre scale and no finite-difference step resolves it. So each case is a smooth regime: the superset with
+# friction and heavy damping (no reversal), and an oscillating step (12 reversals) without kinked elements.
+_STEP_CASES = {
+    "superset_overdamped": (
+        SUPERSET,
+        dict(damping_up_ns_per_m=2000.0, damping_down_ns_per_m=1500.0, damping_quadratic_ns2_per_m2=5.0),
+    ),
+    "laminar_oscillating": (ModelConfig(flow="laminar", friction="none"), {}),
+    "orifice_oscillating": (ModelConfig(friction="none"), {}),
+}
+
+
+@pytest.mark.parametrize("case", list(_STEP_CASES))
+def test_step_gradients_match_finite_differences(case):
+    config, overrides = _STEP_CASES[case]
+    names = config.parameter_names()
+    nominal_params = {k: float(v) for k, v in {**config.nominal_parameters(), **overrides}.items() if k in names}
+    protocol = step_protocol()
+    weights = _weights(601, 4)
+
+    def objective(log_scale):
+        params = {k: nominal_params[k] * jnp.exp(log_scale[i]) for i, k in enumerate(names)}
+        return jnp.sum(weights * simulate_step(params, protocol, config=config).strain)
+
+    value = jax.jit(objective)
+    grad = jax.jit(jax.grad(objective))(jnp.zeros(len(names)))
+    rng = np.random.default_rng(7)
+    for _ in range(3):
+        direction = rng.normal(size=len(names))
+        direction /= np.linalg.norm(direction)
+        along = {"s": 0.0}
+        fd = central_difference(lambda a, d=direction: value(jnp.asarray(a["s"] * d)), along, "s", abs_step=3e-3)
+        assert abs(float(grad @ direction) - fd) <= 1e-5 * abs(fd), (float(grad @ direction), fd)
+
+
+def test_step_gradient_is_finite_with_kinked_elements():
+    """With friction and reversals the gradient is the one-sided derivative of the discrete map: finite."""
+    config = ModelConfig(flow="laminar", damping=True)
+    params = {k: jnp.asarray(v) for k, v in config.nominal_parameters().items()}
+    grads = jax.grad(lambda p: jnp.sum(simulate_step(p, step_protocol(), config=config).strain))(params)
+    assert all(np.isfinite(float(g)) for g in grads.values())

@@ -48,13 +48,21 @@ def extension_force(strain, k_n_per_m, rate, l0_m, width=1e-4):
 
     ``F = k l0 (exp(rate e) - 1)/rate`` with ``e`` the (smoothed) extension ``max(-strain, 0)`` [-]:
     stiffness ``k_n_per_m`` [N/m] at zero extension, growing exponentially with ``rate`` [-] as fibres
-    and polymer chains straighten. Zero for contraction (a slack muscle carries no compression).
+    and polymer chains straighten. Zero for contraction (a slack muscle carries no compression). Beyond
+    ``rate e = 30`` (far outside any physical stretch) the curve continues along its tangent, so that
+    solvers probing absurd stretches see a large finite force instead of an overflow.
     """
     e = smooth_positive(-strain, width)
-    small = jnp.abs(rate * e) < 1e-8
+    x = rate * e
+    small = jnp.abs(x) < 1e-8
     safe_rate = jnp.where(small, 1.0, rate)
-    grow = jnp.where(small, e * (1.0 + 0.5 * rate * e), jnp.expm1(safe_rate * e) / safe_rate)
+    x_capped = jnp.minimum(safe_rate * e, _EXTENSION_EXP_CAP)
+    exponential = (jnp.expm1(x_capped) + jnp.exp(x_capped) * (safe_rate * e - x_capped)) / safe_rate
+    grow = jnp.where(small, e * (1.0 + 0.5 * x), exponential)
     return k_n_per_m * l0_m * grow
+
+
+_EXTENSION_EXP_CAP = 30.0
 
 
 # --- viscoelastic elements -------------------------------------------------------------------------------
@@ -90,16 +98,22 @@ def creep_update(d_n, f_n, f_next, dt_s, c_ns_per_m):
 # --- rate-independent friction ---------------------------------------------------------------------------
 
 
-def dahl_update(f_n, dx_m, stiffness_n_per_m, limit_n):
+#: Width [m] over which the Dahl element's direction of motion turns smoothly from -1 to +1.
+DAHL_SMOOTHING_M = 1e-7
+
+
+def dahl_update(f_n, dx_m, stiffness_n_per_m, limit_n, smoothing_m=DAHL_SMOOTHING_M):
     """Dahl friction (Bouc-Wen with n = 1): force [N] after a displacement step ``dx_m``.
 
     ``dF/dx = k (1 - sgn(dx) F / F_c)``, solved exactly for a monotone step:
-    ``F <- s F_c - (s F_c - F) exp(-k |dx| / F_c)`` with ``s = sgn(dx)``. Rate independent (the result does
-    not depend on how a path is divided into steps), gives a loop of height ~2 F_c, and is the identity when
-    ``dx = 0`` (no creep). The update is continuous in ``dx`` and smooth in the parameters, so parameter
-    gradients exist everywhere; only its slope in ``dx`` changes at a motion reversal.
+    ``F <- s F_c - (s F_c - F) exp(-k s dx / F_c)``. Rate independent (the result does not depend on how a
+    path is divided into steps), gives a loop of height ~2 F_c, and is the identity when ``dx = 0`` (no creep).
+    The direction ``s = tanh(dx / smoothing_m)`` is smoothed over 0.1 um: with an exact sign, the slope in
+    ``dx`` jumps at every reversal, and a muscle at rest (dx at round-off level, sign flickering) has a
+    derivative that depends on round-off. Steps longer than ~2 um (20 widths) are exact to double precision;
+    quasi-static rig samples move the tubes by ~10 um.
     """
-    s = jnp.sign(dx_m)
+    s = jnp.tanh(dx_m / smoothing_m)
     limit = jnp.maximum(limit_n, 1e-12)
     target = s * limit
     return target - (target - f_n) * jnp.exp(-stiffness_n_per_m * dx_m * s / limit)
