@@ -18,7 +18,11 @@ def run(args):
 
 
 run.arguments = lambda p: p.add_argument(
-    "--pressures-kpa", type=float, nargs="+", default=[30, 100, 200, 300, 500], metavar="P",
+    "--pressures-kpa",
+    type=float,
+    nargs="+",
+    default=[30, 100, 200, 300, 500],
+    metavar="P",
     help="pressures to evaluate [kPa] (default: 30 100 200 300 500)",
 )
 
@@ -79,3 +83,76 @@ def check(args):
 
 
 check.arguments = lambda p: p.add_argument("data", metavar="DATA.csv", help="the dataset CSV (or its stem)")
+
+
+@command("simulate", "the virtual rig: write a dataset (CSV + TOML sidecar) simulated from given parameters")
+def simulate(args):
+    from .data import dataset_paths, save
+    from .errors import PeanoBayesInputError
+    from .rig import read_parameter_file, simulate_dataset
+
+    params, config = read_parameter_file(args.params) if args.params else ({}, None)
+    csv_path, toml_path = dataset_paths(args.out)
+    for path in (csv_path, toml_path):
+        if path.is_dir():
+            raise PeanoBayesInputError(f"--out: {path} is a directory; expected a file path like DIR/FC.csv")
+    options = {} if config is None else {"config": config}
+    dataset = simulate_dataset(
+        args.material,
+        params,
+        quirks=args.quirk,
+        seed=args.seed,
+        drift=args.drift,
+        specimens=args.specimens,
+        repeats=args.repeats,
+        progress=lambda line: print(f"simulated {line}", flush=True),
+        **options,
+    )
+    try:
+        save(dataset, csv_path)
+    except OSError as err:
+        raise PeanoBayesInputError(f"--out: cannot write {csv_path} ({err.strerror or err})") from None
+    samples = sum(len(r) for r in dataset.runs)
+    quirks = dataset.provenance["quirks"]
+    print(
+        f"wrote {csv_path} and {toml_path}: {dataset.material.code}, {len(dataset.runs)} runs, {samples} samples, "
+        f"seed {args.seed}, quirks: {quirks}"
+    )
+    return {
+        "csv": str(csv_path),
+        "toml": str(toml_path),
+        "material": dataset.material.code,
+        "runs": len(dataset.runs),
+        "samples": samples,
+        "specimens": list(dataset.specimens),
+        "seed": args.seed,
+        "quirks": [] if quirks == "none" else quirks.split(", "),
+        "drift": args.drift,
+    }
+
+
+def _simulate_arguments(p):
+    from .rig import QUIRKS
+
+    p.add_argument("--material", required=True, metavar="CODE", help="Table 4 material code: TP P PR TPC PC PCS TFC FC")
+    p.add_argument(
+        "--params",
+        metavar="PARAMS.toml",
+        help="[parameters] name = value in SI units, optional [config] ModelConfig fields (default: nominal values)",
+    )
+    p.add_argument("--out", required=True, metavar="PATH.csv", help="dataset to write (PATH.csv + PATH.toml)")
+    p.add_argument("--seed", type=int, default=0, help="seed of every random draw (default: 0)")
+    p.add_argument(
+        "--quirk",
+        action="extend",
+        nargs="+",
+        default=[],
+        metavar="NAME",
+        help=f"switch on an effect (repeatable): {', '.join(QUIRKS)}",
+    )
+    p.add_argument("--drift", action="store_true", help="add a slow linear drift to the force sensor")
+    p.add_argument("--specimens", type=int, default=2, help="specimens per material (default: 2, as in the paper)")
+    p.add_argument("--repeats", type=int, default=3, help="repeats of each test (default: 3, as in the paper)")
+
+
+simulate.arguments = _simulate_arguments
