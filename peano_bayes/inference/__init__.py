@@ -1,0 +1,45 @@
+"""Inference: priors as data (``priors/*.toml``) and the likelihood of rig data; fitting and sampling to come."""
+
+from .likelihood import (
+    DEFAULT_BIN_SIZES,
+    NOISE_PARAMETERS,
+    SOLVER_TOLERANCE,
+    Observations,
+    RunGroup,
+    log_likelihood,
+    pointwise_log_likelihood,
+    predict,
+    prepare,
+)
+from .priors import (
+    ALL_PARAMETERS,
+    DEFAULT_PRIORS_DIR,
+    LIKELIHOOD_PARAMETERS,
+    Marginal,
+    Prior,
+    load_prior,
+    parse_entry,
+    prior_files,
+    prior_for,
+)
+
+__all__ = [
+    "ALL_PARAMETERS",
+    "DEFAULT_BIN_SIZES",
+    "DEFAULT_PRIORS_DIR",
+    "LIKELIHOOD_PARAMETERS",
+    "Marginal",
+    "NOISE_PARAMETERS",
+    "Observations",
+    "Prior",
+    "RunGroup",
+    "SOLVER_TOLERANCE",
+    "load_prior",
+    "log_likelihood",
+    "parse_entry",
+    "pointwise_log_likelihood",
+    "predict",
+    "prepare",
+    "prior_files",
+    "prior_for",
+]
