@@ -12,6 +12,7 @@ Each result carries ``max_residual``, the largest equilibrium error left by the 
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import equinox as eqx
@@ -147,24 +148,38 @@ def _solve_log_theta(
 ):
     """Root of a monotone ``residual(log theta)``, with implicit-function gradients.
 
-    Bisection to ``atol`` in log(theta), then ``iterations`` Newton steps. The bisection runs over
-    ``z_prev +- _LOCAL_HALF_WIDTH`` around the previous sample's root when that holds the root (between samples
-    the half-angle rarely moves by a per cent: about nine bisection steps fewer) and over the whole range
-    otherwise. Under ``vmap`` the bisection loop runs as long as its slowest member, so a batch pays for the
-    whole range only at the samples where some member needs it. ``increasing`` says whether the residual
-    rises with theta.
+    Bisection to ``atol`` in log(theta), then ``iterations`` Newton steps. ``increasing`` says whether the
+    residual rises with theta. Without ``z_prev`` the bisection (optimistix) spans the whole range. With it,
+    ``z_prev +- _LOCAL_HALF_WIDTH`` around the previous sample's root is tried first: between samples the
+    half-angle rarely moves by a per cent, so where that bracket holds the root a fixed number of unrolled
+    bisection steps finishes the job, which XLA fuses into straight-line code. Members whose local bracket
+    misses get the whole range from optimistix first; the others hand it an empty interval, so under ``vmap``
+    its loop costs a batch something only at the samples where some member needs it.
     """
-    bounds = _LOG_THETA
-    if z_prev is not None:
+    if z_prev is None:
+        lo, hi = _LOG_THETA
+    else:
         z_prev = jax.lax.stop_gradient(z_prev)
         near_lo = jnp.clip(z_prev - _LOCAL_HALF_WIDTH, *_LOG_THETA)
         near_hi = jnp.clip(z_prev + _LOCAL_HALF_WIDTH, *_LOG_THETA)
         r_lo, r_hi = residual(near_lo), residual(near_hi)
         holds = (r_lo <= 0.0) & (r_hi >= 0.0) if increasing else (r_lo >= 0.0) & (r_hi <= 0.0)
-        bounds = (jnp.where(holds, near_lo, _LOG_THETA[0]), jnp.where(holds, near_hi, _LOG_THETA[1]))
-    z_guess = jax.lax.stop_gradient(_bisection(residual, atol, increasing, *bounds))
+        lower = jnp.where(holds, z_prev, _LOG_THETA[0])
+        upper = jnp.where(holds, z_prev, _LOG_THETA[1])
+        z_far = _bisection(residual, atol, increasing, lower, upper)
+        lo = jnp.where(holds, near_lo, z_far - atol)
+        hi = jnp.where(holds, near_hi, z_far + atol)
+    if z_prev is None:
+        z_guess = _bisection(residual, atol, increasing)
+    else:
+        for _ in range(math.ceil(math.log2(2.0 * _LOCAL_HALF_WIDTH / atol))):
+            mid = 0.5 * (lo + hi)
+            below = (residual(mid) > 0.0) == increasing  # the root lies below mid
+            hi = jnp.where(below, mid, hi)
+            lo = jnp.where(below, lo, mid)
+        z_guess = 0.5 * (lo + hi)
     solve = lambda fn, z: _newton_steps(fn, z, iterations)[0]  # noqa: E731
-    return jax.lax.custom_root(residual, z_guess, solve, lambda g, y: y / g(1.0))
+    return jax.lax.custom_root(residual, jax.lax.stop_gradient(z_guess), solve, lambda g, y: y / g(1.0))
 
 
 def _strain_residual(strain, pressure_pa, dt_s, state, params, config, geometry, relaxed=False):
