@@ -1,5 +1,6 @@
-"""Inference: priors as data (``priors/*.toml``) and the likelihood of rig data; fitting and sampling to come."""
+"""Inference: priors as data (``priors/*.toml``), the likelihood of rig data, multi-start least squares."""
 
+from .fit import DEFAULT_NOISE, FitResult, fit, fit_quality
 from .likelihood import (
     DEFAULT_BIN_SIZES,
     NOISE_PARAMETERS,
@@ -25,6 +26,10 @@ from .priors import (
 
 __all__ = [
     "ALL_PARAMETERS",
+    "DEFAULT_NOISE",
+    "FitResult",
+    "fit",
+    "fit_quality",
     "DEFAULT_BIN_SIZES",
     "DEFAULT_PRIORS_DIR",
     "LIKELIHOOD_PARAMETERS",
