@@ -2,6 +2,17 @@
 
 from __future__ import annotations
 
+import difflib
+from collections.abc import Iterable
+
+
+def did_you_mean(word: str, choices: Iterable[str], *, brackets: bool = False, cutoff: float = 0.6) -> str:
+    """`` (did you mean 'x'?)`` for the closest of ``choices`` (``[x]`` with ``brackets``), or ``""``."""
+    near = difflib.get_close_matches(word, list(choices), n=1, cutoff=cutoff)
+    if not near:
+        return ""
+    return f" (did you mean [{near[0]}]?)" if brackets else f" (did you mean {near[0]!r}?)"
+
 
 class PeanoBayesInputError(ValueError):
     """Bad input: a file, a specification or an argument that cannot be used as given.

@@ -12,12 +12,11 @@ w = 15 mm, tube length 49.5 mm, channel 30 %, l0 = 0.06 m. SI units throughout.
 
 from __future__ import annotations
 
-import difflib
 from dataclasses import KW_ONLY, dataclass
 from types import MappingProxyType
 
 from .data import Conditions, Material
-from .errors import PeanoBayesInputError
+from .errors import PeanoBayesInputError, did_you_mean
 from .physics import PAPER_GEOMETRY
 
 #: The common geometry of every muscle in the material study (section 4).
@@ -193,8 +192,7 @@ def material(code: str | MaterialSpec) -> MaterialSpec:
     key = str(code).strip().upper()
     if key in MATERIALS:
         return MATERIALS[key]
-    near = difflib.get_close_matches(key, list(MATERIALS), n=1, cutoff=0.5)
-    hint = f" (did you mean {near[0]!r}?)" if near else ""
+    hint = did_you_mean(key, MATERIALS, cutoff=0.5)
     raise PeanoBayesInputError(
         f"unknown material code {code!r}{hint}; expected one of {', '.join(MATERIALS)} (Table 4 of the paper)"
     )

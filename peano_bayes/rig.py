@@ -19,7 +19,6 @@ with NumPy, and builds the dataset. Write it with :func:`peano_bayes.data.save`.
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import json
 import math
 import string
@@ -37,7 +36,7 @@ from . import materials
 from .data import Dataset, Run
 from .data.dataset import OPTIONAL_SIGNALS
 from .data.format import TESTS
-from .errors import PeanoBayesInputError
+from .errors import PeanoBayesInputError, did_you_mean
 from .materials import GEOMETRY, MaterialSpec
 from .physics import (
     DEFAULT_CONFIG,
@@ -174,13 +173,6 @@ _NOT_SWITCHES = {
 }
 
 
-def _did_you_mean(word: str, choices: Iterable[str], section: bool = False) -> str:
-    near = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
-    if not near:
-        return ""
-    return f" (did you mean [{near[0]}]?)" if section else f" (did you mean {near[0]!r}?)"
-
-
 def check_quirks(quirks: Iterable[str]) -> tuple[str, ...]:
     """Quirk names in order, duplicates removed; an unknown name raises :class:`PeanoBayesInputError`."""
     if isinstance(quirks, str):
@@ -194,7 +186,7 @@ def check_quirks(quirks: Iterable[str]) -> tuple[str, ...]:
             raise PeanoBayesInputError(
                 f"effect {name!r} is not a quirk the rig can switch on ({_NOT_SWITCHES[name]}); known quirks: {known}"
             )
-        raise PeanoBayesInputError(f"unknown quirk {name!r}{_did_you_mean(name, QUIRKS)}; known quirks: {known}")
+        raise PeanoBayesInputError(f"unknown quirk {name!r}{did_you_mean(name, QUIRKS)}; known quirks: {known}")
     return names
 
 
@@ -214,7 +206,7 @@ def check_parameter(name: str, value) -> float:
     the parameter's physical bounds."""
     if name not in PARAMETERS:
         raise PeanoBayesInputError(
-            f"unknown parameter {name!r}{_did_you_mean(name, PARAMETERS)}; expected names of "
+            f"unknown parameter {name!r}{did_you_mean(name, PARAMETERS)}; expected names of "
             "peano_bayes.physics.PARAMETERS, in SI units (e.g. tensile_ka_n_per_m)"
         )
     spec = PARAMETERS[name]
@@ -282,7 +274,7 @@ def read_parameter_file(path: str | Path) -> tuple[dict[str, float], ModelConfig
     for section, content in document.items():
         if section not in ("parameters", "config"):
             raise PeanoBayesInputError(
-                f"{path}: unknown section [{section}]{_did_you_mean(section, ('parameters', 'config'), True)}; "
+                f"{path}: unknown section [{section}]{did_you_mean(section, ('parameters', 'config'), brackets=True)}; "
                 "expected [parameters] and optionally [config]"
             )
         if not isinstance(content, dict):
@@ -299,7 +291,7 @@ def _config_from_table(table: Mapping, path: Path) -> ModelConfig:
     for key, value in table.items():
         if key not in defaults:
             raise PeanoBayesInputError(
-                f"{path}: [config]: unknown field {key!r}{_did_you_mean(key, defaults)}; "
+                f"{path}: [config]: unknown field {key!r}{did_you_mean(key, defaults)}; "
                 f"expected ModelConfig fields: {', '.join(defaults)}"
             )
         kind = type(defaults[key])
@@ -476,7 +468,7 @@ def _check_tests(tests: Iterable[str]) -> tuple[str, ...]:
     for test in tests:
         if test not in RIG_TESTS:
             raise PeanoBayesInputError(
-                f"unknown test {test!r}{_did_you_mean(test, RIG_TESTS)}; expected some of {', '.join(RIG_TESTS)}"
+                f"unknown test {test!r}{did_you_mean(test, RIG_TESTS)}; expected some of {', '.join(RIG_TESTS)}"
             )
     if not tests:
         raise PeanoBayesInputError(f"no tests to run; expected some of {', '.join(RIG_TESTS)}")

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import codecs
 import csv
-import difflib
 import io
 import math
 import os
@@ -23,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import tomli_w
 
-from ..errors import DataFormatError
+from ..errors import DataFormatError, did_you_mean
 from ..physics.geometry import Geometry
 from .dataset import Conditions, Dataset, Material, Run
 from .format import (
@@ -224,7 +223,7 @@ def _check_header(names: list[str], name: str) -> list[Column]:
         seen.add(col)
         if col not in COLUMN_BY_NAME:
             raise DataFormatError(
-                "unknown column" + _did_you_mean(col, COLUMN_BY_NAME),
+                "unknown column" + did_you_mean(col, COLUMN_BY_NAME),
                 file=name,
                 row=1,
                 column=col,
@@ -267,7 +266,7 @@ def _parse_rows(
         test = fields[test_index].strip()
         if test not in TESTS:
             raise DataFormatError(
-                ("empty cell" if not test else "unknown test type" + _did_you_mean(test, TESTS)),
+                ("empty cell" if not test else "unknown test type" + did_you_mean(test, TESTS)),
                 file=name,
                 row=row,
                 column="test",
@@ -412,7 +411,7 @@ def _parse_sidecar(text: str, name: str) -> tuple[Material, Geometry, Conditions
     for section in document:
         if section not in SECTIONS:
             raise DataFormatError(
-                "unknown section" + _did_you_mean(section, SECTIONS, brackets=True),
+                "unknown section" + did_you_mean(section, SECTIONS, brackets=True),
                 file=name,
                 row=_toml_line(text, section),
                 column=section,
@@ -456,7 +455,7 @@ def _parse_sidecar(text: str, name: str) -> tuple[Material, Geometry, Conditions
                     )
                 continue
             raise DataFormatError(
-                f"unknown key in [{section}]" + _did_you_mean(key, key_names),
+                f"unknown key in [{section}]" + did_you_mean(key, key_names),
                 file=name,
                 row=_toml_line(text, section, key),
                 column=f"{section}.{key}",
@@ -525,13 +524,6 @@ def _toml_line(text: str, section: str | None, key: str | None = None) -> int | 
         if key_pattern is not None and current == section and key_pattern.match(line):
             return number
     return None
-
-
-def _did_you_mean(word: str, choices, *, brackets: bool = False) -> str:
-    near = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
-    if not near:
-        return ""
-    return f" (did you mean [{near[0]}]?)" if brackets else f" (did you mean {near[0]!r}?)"
 
 
 # --- writing ------------------------------------------------------------------------------------------------

@@ -50,7 +50,6 @@ then in the priors directory.
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import math
 import tomllib
 from collections.abc import Mapping
@@ -62,7 +61,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy import special
 
-from ..errors import PeanoBayesInputError
+from ..errors import PeanoBayesInputError, did_you_mean
 from ..materials import MATERIALS
 from ..physics.model import PARAMETERS, ModelConfig, Parameter
 
@@ -414,11 +413,6 @@ def _fail(path, message: str, name: str | None = None) -> PeanoBayesInputError:
     return PeanoBayesInputError(f"{where}: {message}")
 
 
-def _did_you_mean(word: str, options) -> str:
-    near = difflib.get_close_matches(word, list(options), n=1, cutoff=0.6)
-    return f" (did you mean {near[0]!r}?)" if near else ""
-
-
 def _resolve_start(code_or_path: str | Path, directory: Path) -> Path:
     """The first file of a material code or path."""
     as_path = Path(code_or_path)
@@ -441,7 +435,7 @@ def _resolve_start(code_or_path: str | Path, directory: Path) -> Path:
             f"expected {code}.toml or a file listing it in meta.materials"
         )
     raise PeanoBayesInputError(
-        f"unknown material code or prior file {code!r}{_did_you_mean(code.upper(), MATERIALS)}; "
+        f"unknown material code or prior file {code!r}{did_you_mean(code.upper(), MATERIALS)}; "
         f"expected one of {', '.join(MATERIALS)} or a path to a .toml prior file"
     )
 
@@ -483,7 +477,7 @@ def _read_chain(start: Path, directory: Path) -> list[tuple[Path, str, dict]]:
 def _check_document(path: Path, doc: dict) -> None:
     for key, value in doc.items():
         if key not in _SECTIONS:
-            hint = _did_you_mean(key, _SECTIONS)
+            hint = did_you_mean(key, _SECTIONS)
             if key in ALL_PARAMETERS:
                 hint = f" (parameter tables go under [parameters.{key}])"
             raise _fail(path, f"unknown section [{key}]{hint}; expected {', '.join(_SECTIONS)}")
@@ -493,7 +487,7 @@ def _check_document(path: Path, doc: dict) -> None:
     for key in meta:
         if key not in _META_KEYS:
             raise _fail(
-                path, f"unknown key meta.{key}{_did_you_mean(key, _META_KEYS)}; expected {', '.join(_META_KEYS)}"
+                path, f"unknown key meta.{key}{did_you_mean(key, _META_KEYS)}; expected {', '.join(_META_KEYS)}"
             )
     if "extends" in meta and not isinstance(meta["extends"], str):
         raise _fail(path, f"meta.extends must be a file name, got {meta['extends']!r}")
@@ -503,7 +497,7 @@ def _check_document(path: Path, doc: dict) -> None:
         raise _fail(path, f"meta.materials must be a list of material codes, got {meta['materials']!r}")
     for name, entry in doc.get("parameters", {}).items():
         if name not in ALL_PARAMETERS:
-            raise _fail(path, f"unknown parameter{_did_you_mean(name, ALL_PARAMETERS)}; see PARAMETERS", name)
+            raise _fail(path, f"unknown parameter{did_you_mean(name, ALL_PARAMETERS)}; see PARAMETERS", name)
         if not isinstance(entry, dict):
             raise _fail(path, f"entry must be a table [parameters.{name}], got {entry!r}", name)
 
@@ -513,7 +507,7 @@ def _parse_config(path: Path, table: dict) -> dict:
         if key not in _CONFIG_FIELDS:
             raise _fail(
                 path,
-                f"unknown ModelConfig field config.{key}{_did_you_mean(key, _CONFIG_FIELDS)}; "
+                f"unknown ModelConfig field config.{key}{did_you_mean(key, _CONFIG_FIELDS)}; "
                 f"expected one of {', '.join(_CONFIG_FIELDS)}",
             )
         expected = type(getattr(ModelConfig(), key))
@@ -546,7 +540,7 @@ def parse_entry(path: Path | str, name: str, entry: Mapping[str, object]) -> Mar
     **Raises:** :class:`~peano_bayes.errors.PeanoBayesInputError` naming ``path``, ``name`` and the problem.
     """
     if name not in ALL_PARAMETERS:
-        raise _fail(path, f"unknown parameter{_did_you_mean(name, ALL_PARAMETERS)}; see PARAMETERS", name)
+        raise _fail(path, f"unknown parameter{did_you_mean(name, ALL_PARAMETERS)}; see PARAMETERS", name)
     spec = ALL_PARAMETERS[name]
     for field in ("distribution", "unit", "provenance"):
         if field not in entry:
@@ -557,7 +551,7 @@ def parse_entry(path: Path | str, name: str, entry: Mapping[str, object]) -> Mar
     if dist not in _REQUIRED:
         raise _fail(
             path,
-            f"unknown distribution {dist!r}{_did_you_mean(dist, _REQUIRED)}; expected one of {', '.join(_REQUIRED)}",
+            f"unknown distribution {dist!r}{did_you_mean(dist, _REQUIRED)}; expected one of {', '.join(_REQUIRED)}",
             name,
         )
     allowed = _COMMON_FIELDS + _REQUIRED[dist]
@@ -565,7 +559,7 @@ def parse_entry(path: Path | str, name: str, entry: Mapping[str, object]) -> Mar
         if field not in allowed:
             raise _fail(
                 path,
-                f"unknown field '{field}'{_did_you_mean(field, allowed)} for {dist}; expected {', '.join(allowed)}",
+                f"unknown field '{field}'{did_you_mean(field, allowed)} for {dist}; expected {', '.join(allowed)}",
                 name,
             )
     if entry["unit"] != spec.unit:

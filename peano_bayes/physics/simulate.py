@@ -115,13 +115,11 @@ class StepResult(NamedTuple):
 
 
 def _newton_steps(fn, z, iterations: int):
-    """``iterations`` Newton steps on ``fn(z) = 0``, clipped to the admissible range; returns (z, last step)."""
-    step = jnp.asarray(jnp.inf)
+    """``iterations`` Newton steps on ``fn(z) = 0``, clipped to the admissible range."""
     for _ in range(iterations):
         r, dr = jax.jvp(fn, (z,), (jnp.ones_like(z),))
-        z_next = jnp.clip(z - r / dr, *_LOG_THETA)
-        step, z = jnp.abs(z_next - z), z_next
-    return z, step
+        z = jnp.clip(z - r / dr, *_LOG_THETA)
+    return z
 
 
 def _bisection(residual, atol: float, increasing: bool, lower=_LOG_THETA[0], upper=_LOG_THETA[1]):
@@ -157,7 +155,7 @@ def _solve_log_theta(
     its loop costs a batch something only at the samples where some member needs it.
     """
     if z_prev is None:
-        lo, hi = _LOG_THETA
+        z_guess = _bisection(residual, atol, increasing)
     else:
         z_prev = jax.lax.stop_gradient(z_prev)
         near_lo = jnp.clip(z_prev - _LOCAL_HALF_WIDTH, *_LOG_THETA)
@@ -169,16 +167,13 @@ def _solve_log_theta(
         z_far = _bisection(residual, atol, increasing, lower, upper)
         lo = jnp.where(holds, near_lo, z_far - atol)
         hi = jnp.where(holds, near_hi, z_far + atol)
-    if z_prev is None:
-        z_guess = _bisection(residual, atol, increasing)
-    else:
         for _ in range(math.ceil(math.log2(2.0 * _LOCAL_HALF_WIDTH / atol))):
             mid = 0.5 * (lo + hi)
             below = (residual(mid) > 0.0) == increasing  # the root lies below mid
             hi = jnp.where(below, mid, hi)
             lo = jnp.where(below, lo, mid)
         z_guess = 0.5 * (lo + hi)
-    solve = lambda fn, z: _newton_steps(fn, z, iterations)[0]  # noqa: E731
+    solve = lambda fn, z: _newton_steps(fn, z, iterations)  # noqa: E731
     return jax.lax.custom_root(residual, jax.lax.stop_gradient(z_guess), solve, lambda g, y: y / g(1.0))
 
 
