@@ -16,7 +16,12 @@ from peano_bayes.inference.likelihood import (
 from peano_bayes.physics import DEFAULT_CONFIG
 from peano_bayes.rig import RigNoise, simulate_dataset
 
-NOISE = {"noise_force_n": 0.2, "noise_strain": 2e-4}
+NOISE = {
+    "noise_load_cycle_force_n": 0.2,
+    "noise_blocking_force_n": 0.2,
+    "noise_stroke_strain": 2e-4,
+    "noise_step_strain": 2e-4,
+}
 
 
 @pytest.fixture(scope="module")
@@ -66,7 +71,7 @@ def test_likelihood_prefers_the_truth_and_is_consistent(dataset, truth):
     assert np.isfinite(at_truth)
     for name in ("tensile_ka_n_per_m", "bending_k2_n", "friction_force_n"):
         assert float(ll({**truth, **NOISE, name: truth[name] * 1.5})) < at_truth - 10.0, name
-    pointwise = pointwise_log_likelihood({**truth, **NOISE}, obs)
+    pointwise = jax.jit(lambda p: pointwise_log_likelihood(p, obs))({**truth, **NOISE})
     assert sum(float(jnp.sum(p)) for p in pointwise) == pytest.approx(at_truth, rel=1e-12)
     assert sum(p.size for p in pointwise) == obs.n_bins
 
@@ -74,7 +79,7 @@ def test_likelihood_prefers_the_truth_and_is_consistent(dataset, truth):
 def test_bad_parameters_give_minus_infinity_not_nan(dataset, truth):
     obs = prepare(dataset)
     ll = jax.jit(lambda p: log_likelihood(p, obs))
-    for bad in ({"tensile_ka_n_per_m": jnp.nan}, {"noise_force_n": -1.0}, {"length_fraction": -0.5}):
+    for bad in ({"tensile_ka_n_per_m": jnp.nan}, {"noise_load_cycle_force_n": -1.0}, {"length_fraction": -0.5}):
         value = float(ll({**truth, **NOISE, **bad}))
         assert value == -np.inf, bad
 

@@ -63,7 +63,13 @@ def test_default_covers_every_parameter_and_noise_scale():
     prior = load_prior(Path(prior_files()[0]).parent / "default.toml")
     assert set(prior.names) == set(PARAMETERS) | set(LIKELIHOOD_PARAMETERS)
     assert prior.names == tuple(ALL_PARAMETERS)  # fixed order: physics first, then likelihood
-    assert set(LIKELIHOOD_PARAMETERS) == {"noise_force_n", "noise_strain", "noise_pressure_pa", "specimen_log_sd"}
+    assert set(LIKELIHOOD_PARAMETERS) == {
+        "noise_load_cycle_force_n",
+        "noise_blocking_force_n",
+        "noise_stroke_strain",
+        "noise_step_strain",
+        "specimen_log_sd",
+    }
 
 
 @pytest.mark.parametrize("code", CODES)
@@ -103,7 +109,7 @@ def test_prior_is_immutable():
     with pytest.raises(dataclasses.FrozenInstanceError):
         prior.names = ()
     with pytest.raises(TypeError):
-        prior.marginals["noise_force_n"] = None
+        prior.marginals["noise_load_cycle_force_n"] = None
     with pytest.raises(TypeError):
         prior.config_overrides["mount"] = False
 
@@ -331,10 +337,10 @@ def test_priors_dir_argument(tmp_path):
     (tmp_path / "default.toml").write_text(default.read_text())
     (tmp_path / "FC.toml").write_text(
         '[meta]\nmaterial = "FC"\nextends = "default.toml"\n[config]\nseries_kelvin = 1\n'
-        '[parameters.noise_force_n]\ndistribution = "lognormal"\nmedian = 3.0\nsigma_log = 0.5\n'
+        '[parameters.noise_load_cycle_force_n]\ndistribution = "lognormal"\nmedian = 3.0\nsigma_log = 0.5\n'
         'unit = "N"\nprovenance = "my load cell"\n'
     )
     prior = load_prior("FC", priors_dir=tmp_path)
     assert prior.config.series_kelvin == 1
-    assert prior.marginals["noise_force_n"].distribution == "lognormal"
+    assert prior.marginals["noise_load_cycle_force_n"].distribution == "lognormal"
     assert jnp.isfinite(prior.log_prob(prior.median_unconstrained()))

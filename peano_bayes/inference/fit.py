@@ -18,11 +18,16 @@ import numpy as np
 import optimistix as optx
 
 from ..physics import ModelConfig
-from .likelihood import OBSERVED, Observations, predict
+from .likelihood import OBSERVED, SOLVER_TOLERANCE, Observations, predict
 from .priors import Prior
 
 #: Noise scales [per raw sample] used to weight the residuals when none are given.
-DEFAULT_NOISE = {"noise_force_n": 0.5, "noise_strain": 5e-4}
+DEFAULT_NOISE = {
+    "noise_load_cycle_force_n": 0.5,
+    "noise_blocking_force_n": 0.5,
+    "noise_stroke_strain": 5e-4,
+    "noise_step_strain": 5e-4,
+}
 
 
 @dataclass(frozen=True, eq=False)
@@ -31,7 +36,8 @@ class FitResult:
 
     **Fields:** ``names`` (d,); ``u`` (d,) best point, unconstrained; ``params`` name -> value [SI];
     ``covariance`` (d, d) Laplace covariance in u; ``cost`` half the sum of squared residuals at ``u``;
-    ``n_starts``, ``n_failed`` (starts that did not report success), ``start_costs`` (n_starts,) (inf where
+    ``n_starts``, ``n_failed`` (starts that did not report success or end where the physics solver misses
+    its tolerance), ``start_costs`` (n_starts,) (inf where
     failed); ``noise`` the weighting noise scales; ``noise_estimate`` noise scales re-estimated from the
     residuals; ``quality`` per test: RMSE, max |error| and R^2 of the observed signal; ``seconds`` wall time
     (compile included).
@@ -139,11 +145,21 @@ def fit(
     fn = residual_function(observations, prior, config, noise, spread, fixed)
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
 
+    def solver_ok(u):
+        params = {**fixed, **prior.from_unconstrained(u)}
+        errors = [predict(params, g, config=config, geometry=observations.geometry)[1] for g in observations.groups]
+        return jnp.all(
+            jnp.stack(
+                [jnp.all(e <= SOLVER_TOLERANCE[g.test]) for e, g in zip(errors, observations.groups, strict=True)]
+            )
+        )
+
     def one(u0):
         sol = optx.least_squares(fn, solver, u0, max_steps=max_steps, throw=False)
         r = fn(sol.value, None)
         cost = 0.5 * jnp.sum(r**2)
-        ok = (sol.result == optx.RESULTS.successful) & jnp.isfinite(cost)
+        # A point where the physics solver misses its tolerance has likelihood zero (see likelihood.py).
+        ok = (sol.result == optx.RESULTS.successful) & jnp.isfinite(cost) & solver_ok(sol.value)
         return sol.value, ok, jnp.where(ok, cost, jnp.inf)
 
     starts = np.vstack([np.asarray(prior.median_unconstrained())[None], prior.sample(seed, n_starts - 1)])

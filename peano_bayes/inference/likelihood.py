@@ -4,8 +4,9 @@ Knows nothing about files (it takes a validated :class:`~peano_bayes.data.Datase
 called through the four test simulations; runs of one test are stacked and simulated in one ``vmap``.
 
 **Observed signal per test:** force [N] in the load cycle and blocking tests (strain-controlled), strain [-] in
-the stroke and step tests (load-controlled). Each gets its own noise scale: ``noise_force_n`` [N] or
-``noise_strain`` [-], the standard deviation of one raw sample.
+the stroke and step tests (load-controlled). Each test has its own noise scale (:data:`OBSERVED`, e.g.
+``noise_stroke_strain`` [-]), the standard deviation of one raw sample's residual: sensor noise plus whatever
+the model misses in that test.
 
 **Data reduction (binning):** a rig samples far faster than quasi-static physics changes, and the cost of a
 likelihood evaluation grows with the number of simulated samples. Consecutive samples are averaged in bins of
@@ -15,6 +16,12 @@ signal's curvature times the bin width squared, negligible at the default of 4 s
 ``tests/test_likelihood.py``). Binning also averages the noise of the measured strain that drives a load
 cycle, which would otherwise make the friction element see spurious reversals. The step response is not
 binned by default (its dynamics need every sample).
+
+**Driving inputs (errors in variables):** before binning, the measured inputs that drive a simulation
+(:data:`DRIVING_INPUTS`) are replaced by their piecewise-linear least-squares fit (ramps, holds and steps, see
+:mod:`~peano_bayes.inference.denoise`). Raw, their sensor noise is amplified by the model's sensitivity: on the
+bundled TP data at the true parameters, stroke and step residuals were 14 and 21 times the strain noise, and
+1.0 times with the fitted inputs.
 """
 
 from __future__ import annotations
@@ -41,36 +48,55 @@ from ..physics import (
     simulate_step,
     simulate_stroke,
 )
+from .denoise import noise_sd, piecewise_linear_fit
 
 #: Samples averaged per bin, by test (see the module docstring).
 DEFAULT_BIN_SIZES = MappingProxyType({"load_cycle": 4, "blocking": 4, "stroke": 4, "step": 1})
 #: The observed signal and its noise parameter, by test.
 OBSERVED = MappingProxyType(
     {
-        "load_cycle": ("force_n", "noise_force_n"),
-        "blocking": ("force_n", "noise_force_n"),
-        "stroke": ("strain", "noise_strain"),
-        "step": ("strain", "noise_strain"),
+        "load_cycle": ("force_n", "noise_load_cycle_force_n"),
+        "blocking": ("force_n", "noise_blocking_force_n"),
+        "stroke": ("strain", "noise_stroke_strain"),
+        "step": ("strain", "noise_step_strain"),
     }
 )
-NOISE_PARAMETERS = ("noise_force_n", "noise_strain")
+NOISE_PARAMETERS = tuple(noise for _, noise in OBSERVED.values())
+#: The measured signals that drive each test's simulation; :func:`prepare` replaces them by their
+#: piecewise-linear fit (:mod:`peano_bayes.inference.denoise`) so their sensor noise does not drive the model.
+DRIVING_INPUTS = MappingProxyType(
+    {
+        "load_cycle": ("strain", "pressure_pa"),
+        "blocking": ("pressure_pa",),
+        "stroke": ("pressure_pa",),
+        "step": ("supply_pa",),
+    }
+)
 #: Integration substeps per (binned) sample interval of the step test.
 STEP_SUBSTEPS = 2
 #: Largest solver equilibrium error (``max_residual`` of a simulation) accepted, by test: [m] where strain is
 #: imposed, [N] where force is (the step's inertial residual sits near 1e-5 N when converged).
 SOLVER_TOLERANCE = MappingProxyType({"load_cycle": 1e-6, "blocking": 1e-6, "stroke": 1e-2, "step": 1e-2})
+#: Per-specimen log stiffness factor, (n_specimens,), an optional entry of the parameters (see :func:`predict`).
+SPECIMEN_OFFSET = "specimen_log_offset"
+#: Parameters scaled by a specimen's stiffness factor: every stiffness of the tube wall (the rig's specimens
+#: differ by hand-making: film thickness, bonding).
+SPECIMEN_SCALED = frozenset(
+    {"tensile_ka_n_per_m", "tensile_kb_n_per_m2", "bending_k1_n", "bending_k2_n", "extension_k_n_per_m"}
+)
 #: Degrees of freedom of the Student-t option.
 STUDENT_T_DOF = 4.0
 
 
 @dataclass(frozen=True, eq=False)
 class RunGroup:
-    """Runs of one test with equal reduced length, stacked for one vmapped simulation.
+    """Runs of one test with equal reduced length, stacked for one vmapped simulation of ``u <= r`` inputs.
 
-    **Fields:** ``test``; ``keys`` (r,) of ``(specimen, test, run)``; ``specimen_index`` (r,) int into
-    :attr:`Observations.specimens`; ``time_s``, ``strain``, ``pressure_pa``, ``supply_pa`` (r, m) binned inputs
-    (``supply_pa`` only for steps); ``load_n`` (r,) hanging or inertial load [N]; ``observed`` (r, m) bin means
-    of the observed signal; ``counts`` (r, m) raw samples per bin.
+    **Fields:** ``test``; ``keys`` (r,) of ``(specimen, test, run)``; ``observed`` (r, m) bin means of the
+    observed signal; ``counts`` (r, m) raw samples per bin; ``shared`` (r,) int, the simulated input row of
+    each run (repeats of one protocol share one). Per simulated row: ``specimen_index`` (u,) int into
+    :attr:`Observations.specimens`; ``time_s``, ``strain``, ``pressure_pa``, ``supply_pa`` (u, m) binned inputs
+    (``supply_pa`` only for steps); ``load_n`` (u,) hanging or inertial load [N].
     """
 
     test: str
@@ -83,10 +109,16 @@ class RunGroup:
     load_n: np.ndarray
     observed: np.ndarray
     counts: np.ndarray
+    shared: np.ndarray
 
     @property
     def n_bins(self) -> int:
         return int(self.observed.size)
+
+    @property
+    def run_specimen_index(self) -> np.ndarray:
+        """(r,) specimen of every run."""
+        return self.specimen_index[self.shared]
 
 
 @dataclass(frozen=True, eq=False)
@@ -118,48 +150,107 @@ def bin_means(values: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
         return np.where(counts > 0, sums / np.maximum(counts, 1.0), np.nan), counts
 
 
-def _reduce_run(run, k: int):
+def _reduce_run(run, k: int, denoise: bool) -> dict:
+    """One run binned by ``k``: inputs (driving ones denoised), observed bin means, counts, and the raw noise sd
+    of each driving input (for :func:`_share_repeats`)."""
     signal, _ = OBSERVED[run.test]
-    time_s, _ = bin_means(run.time_s, k)
-    strain, _ = bin_means(run.strain, k)
-    pressure, _ = bin_means(run.pressure_pa, k)
-    supply = bin_means(run.supply_pa, k)[0] if run.supply_pa is not None else None
-    observed, counts = bin_means(getattr(run, signal), k)
-    if run.test == "step" and supply is None:
+    driving = DRIVING_INPUTS[run.test] if denoise else ()
+    if run.test == "step" and run.supply_pa is None:
         raise ValueError(f"step run {run.key} has no supply pressure; the step likelihood needs supply_kpa")
-    load = float(np.nanmedian(run.load_n)) if run.load_n is not None and np.any(np.isfinite(run.load_n)) else None
-    return time_s, strain, pressure, supply, load, observed, counts
+    out, input_sd = {}, {}
+    for name in ("strain", "pressure_pa", "supply_pa"):
+        raw = getattr(run, name)
+        if raw is None:
+            out[name] = None
+            continue
+        if name in driving:
+            input_sd[name] = noise_sd(raw)
+            raw = piecewise_linear_fit(run.time_s, raw, input_sd[name])
+        out[name] = bin_means(raw, k)[0]
+    out["time_s"] = bin_means(run.time_s, k)[0]
+    out["observed"], out["counts"] = bin_means(getattr(run, signal), k)
+    has_load = run.load_n is not None and np.any(np.isfinite(run.load_n))
+    out["load_n"] = float(np.nanmedian(run.load_n)) if has_load else None
+    out["input_sd"] = input_sd
+    return out
 
 
-def prepare(dataset: Dataset, bin_sizes=DEFAULT_BIN_SIZES, *, stroke_load_n: float = 5.5) -> Observations:
-    """Reduce ``dataset`` for the likelihood: bin every run (``bin_sizes`` by test) and stack runs of a test
-    that have the same number of bins. ``stroke_load_n`` [N] is used where a stroke run records no load."""
+def _share_repeats(test: str, members: list) -> tuple[np.ndarray, np.ndarray]:
+    """Which runs of a group can share one simulation: same specimen, time grid and load, and driving inputs
+    equal to within one raw noise sd everywhere (repeats of one commanded protocol, denoised). Returns
+    ``(simulated (u,), shared (r,))``: the first run of each set and, per run, the index of its set."""
+    simulated: list[int] = []
+    shared = np.empty(len(members), dtype=int)
+    for i, (run, red) in enumerate(members):
+        for j, first in enumerate(simulated):
+            other_run, other = members[first]
+            same = bool(red["input_sd"]) and (
+                run.specimen == other_run.specimen
+                and red["load_n"] == other["load_n"]
+                and np.allclose(red["time_s"], other["time_s"], rtol=0.0, atol=1e-9)
+                and all(
+                    name in other["input_sd"]
+                    and np.nanmax(np.abs(red[name] - other[name])) <= min(sd, other["input_sd"][name])
+                    for name, sd in red["input_sd"].items()
+                )
+            )
+            if same:
+                shared[i] = j
+                break
+        else:
+            shared[i] = len(simulated)
+            simulated.append(i)
+    return np.array(simulated), shared
+
+
+def prepare(
+    dataset: Dataset,
+    bin_sizes=DEFAULT_BIN_SIZES,
+    *,
+    stroke_load_n: float = 5.5,
+    denoise_inputs: bool = True,
+    share_repeats: bool = True,
+) -> Observations:
+    """Reduce ``dataset`` for the likelihood: denoise the driving inputs (``denoise_inputs``, see
+    :data:`DRIVING_INPUTS`), bin every run (``bin_sizes`` by test), stack runs of a test that have the same
+    number of bins, and let repeats of one protocol share a simulation from their averaged denoised inputs
+    (``share_repeats``; only with ``denoise_inputs``). ``stroke_load_n`` [N] is used where a stroke run
+    records no load."""
     bin_sizes = MappingProxyType({**DEFAULT_BIN_SIZES, **dict(bin_sizes)})
     specimens = tuple(dataset.specimens)
     buckets: dict[tuple[str, int], list] = {}
     for run in dataset.runs:
-        reduced = _reduce_run(run, bin_sizes[run.test])
-        buckets.setdefault((run.test, reduced[0].shape[0]), []).append((run, reduced))
+        reduced = _reduce_run(run, bin_sizes[run.test], denoise_inputs)
+        if reduced["load_n"] is None:
+            if run.test == "step":
+                raise ValueError(f"step run {run.key} records no load; the step likelihood needs load_n")
+            reduced["load_n"] = stroke_load_n
+        buckets.setdefault((run.test, reduced["time_s"].shape[0]), []).append((run, reduced))
     groups = []
     for (test, _), members in sorted(buckets.items()):
-        loads = []
-        for run, (*_, load, _obs, _counts) in members:
-            if load is None and test == "step":
-                raise ValueError(f"step run {run.key} records no load; the step likelihood needs load_n")
-            loads.append(stroke_load_n if load is None else load)
-        stack = lambda i, members=members: np.stack([m[1][i] for m in members])  # noqa: E731
+        if share_repeats and denoise_inputs:
+            simulated, shared = _share_repeats(test, members)
+        else:
+            simulated, shared = np.arange(len(members)), np.arange(len(members))
+
+        def inputs(name, members=members, simulated=simulated, shared=shared):
+            """(u, m): per simulated set, the mean of its members' (denoised) input."""
+            rows = np.stack([red[name] for _, red in members])
+            return np.stack([rows[shared == j].mean(axis=0) for j in range(len(simulated))])
+
         groups.append(
             RunGroup(
                 test=test,
                 keys=tuple(run.key for run, _ in members),
-                specimen_index=np.array([specimens.index(run.specimen) for run, _ in members]),
-                time_s=stack(0),
-                strain=stack(1),
-                pressure_pa=stack(2),
-                supply_pa=stack(3) if test == "step" else None,
-                load_n=np.array(loads),
-                observed=stack(5),
-                counts=stack(6),
+                specimen_index=np.array([specimens.index(members[i][0].specimen) for i in simulated]),
+                time_s=np.stack([members[i][1]["time_s"] for i in simulated]),
+                strain=inputs("strain"),
+                pressure_pa=inputs("pressure_pa"),
+                supply_pa=inputs("supply_pa") if test == "step" else None,
+                load_n=np.array([members[i][1]["load_n"] for i in simulated]),
+                observed=np.stack([red["observed"] for _, red in members]),
+                counts=np.stack([red["counts"] for _, red in members]),
+                shared=shared,
             )
         )
     return Observations(specimens, tuple(groups), bin_sizes, dataset.geometry)
@@ -184,15 +275,22 @@ def _simulate(test: str, params, time_s, strain, pressure_pa, supply_pa, load_n,
 def predict(params, group: RunGroup, *, config: ModelConfig = DEFAULT_CONFIG, geometry: Geometry = PAPER_GEOMETRY):
     """Predicted observed signal (r, m) of every run in ``group`` and each run's solver error (r,).
 
-    ``params``: model parameters by name, each a scalar (shared) or an array of shape (n_specimens,).
+    ``params``: model parameters by name, each a scalar (shared) or an array of shape (n_specimens,); with
+    ``specimen_log_offset`` (n_specimens,) the :data:`SPECIMEN_SCALED` parameters of specimen ``s`` are
+    multiplied by ``exp(specimen_log_offset[s])`` (one stiffness factor per specimen).
     """
+    offset = params.get(SPECIMEN_OFFSET)
+    params = {k: v for k, v in params.items() if k != SPECIMEN_OFFSET}
 
     def one(specimen, time_s, strain, pressure, supply, load):
         p = {k: (v[specimen] if jnp.ndim(v) else v) for k, v in params.items()}
+        if offset is not None:
+            factor = jnp.exp(offset[specimen])
+            p = {k: v * factor if k in SPECIMEN_SCALED else v for k, v in p.items()}
         return _simulate(group.test, p, time_s, strain, pressure, supply, load, config, geometry)
 
     supply = group.supply_pa if group.supply_pa is not None else group.pressure_pa
-    return jax.vmap(one)(
+    predicted, error = jax.vmap(one)(
         jnp.asarray(group.specimen_index),
         jnp.asarray(group.time_s),
         jnp.asarray(group.strain),
@@ -200,6 +298,8 @@ def predict(params, group: RunGroup, *, config: ModelConfig = DEFAULT_CONFIG, ge
         jnp.asarray(supply),
         jnp.asarray(group.load_n),
     )
+    shared = jnp.asarray(group.shared)
+    return predicted[shared], error[shared]
 
 
 def _log_density(residual, scale, family: str):
@@ -225,14 +325,14 @@ def pointwise_log_likelihood(
 ):
     """Log-likelihood of every bin: a tuple of (r, m) arrays, one per run group (NaN bins give 0).
 
-    ``params`` holds the model parameters (scalars or (n_specimens,) arrays) and the noise scales
-    ``noise_force_n`` [N] and ``noise_strain`` [-] of one raw sample. ``family``: ``"gaussian"`` or
+    ``params`` holds the model parameters (scalars or (n_specimens,) arrays) and the noise scale of each test
+    present (:data:`OBSERVED`) per raw sample. ``family``: ``"gaussian"`` or
     ``"student_t"`` (4 degrees of freedom, for outliers). A run whose solver error exceeds its
     ``solver_tolerance`` (by test, see :data:`SOLVER_TOLERANCE`) gets -inf in every bin.
     """
     if family not in ("gaussian", "student_t"):
         raise ValueError(f"family must be 'gaussian' or 'student_t', got {family!r}")
-    model = {k: v for k, v in params.items() if k not in NOISE_PARAMETERS}
+    model = {k: v for k, v in params.items() if k not in NOISE_PARAMETERS and k != "specimen_log_sd"}
     out = []
     for group in observations.groups:
         predicted, solver_error = predict(model, group, config=config, geometry=observations.geometry)
@@ -256,7 +356,10 @@ def log_likelihood(params, observations: Observations, **kwargs):
 
 __all__ = [
     "DEFAULT_BIN_SIZES",
+    "DRIVING_INPUTS",
     "NOISE_PARAMETERS",
+    "SPECIMEN_OFFSET",
+    "SPECIMEN_SCALED",
     "OBSERVED",
     "SOLVER_TOLERANCE",
     "Observations",

@@ -70,11 +70,12 @@ DEFAULT_PRIORS_DIR = Path(__file__).resolve().parents[2] / "priors"
 #: The root prior every other prior file extends.
 DEFAULT_FILE = "default.toml"
 
-#: Parameters of the likelihood (not of the physics): noise scales and the specimen-pooling scale.
+#: Parameters of the likelihood (not of the physics): a noise scale per test and the specimen-pooling scale.
 LIKELIHOOD_PARAMETERS: dict[str, Parameter] = {
-    "noise_force_n": Parameter("N", "sd of the force residual (load cell noise + model error)", 2.0, (0.0, math.inf)),
-    "noise_strain": Parameter("-", "sd of the strain residual", 0.01, (0.0, math.inf)),
-    "noise_pressure_pa": Parameter("Pa", "sd of the pressure residual", 2e3, (0.0, math.inf)),
+    "noise_load_cycle_force_n": Parameter("N", "sd of one force sample's residual, load cycles", 2.0, (0.0, math.inf)),
+    "noise_blocking_force_n": Parameter("N", "sd of one force sample's residual, blocking tests", 2.0, (0.0, math.inf)),
+    "noise_stroke_strain": Parameter("-", "sd of one strain sample's residual, stroke tests", 0.01, (0.0, math.inf)),
+    "noise_step_strain": Parameter("-", "sd of one strain sample's residual, step responses", 0.01, (0.0, math.inf)),
     "specimen_log_sd": Parameter(
         "-", "sd of the log stiffness difference between the two specimens of a material", 0.1, (0.0, math.inf)
     ),
@@ -213,7 +214,12 @@ class Marginal:
             return jnp.exp(y), y + math.log(span) + log_jac_logistic
         if kind == "logit":
             span = self.high - self.low
-            x = jnp.where(u < 0, self.low + span * jax.nn.sigmoid(u), self.high - span * jax.nn.sigmoid(-u))
+            # exp(log_sigmoid) keeps x = low + tiny representable where sigmoid(u) itself would underflow.
+            x = jnp.where(
+                u < 0,
+                self.low + jnp.exp(math.log(span) + jax.nn.log_sigmoid(u)),
+                self.high - jnp.exp(math.log(span) + jax.nn.log_sigmoid(-u)),
+            )
             return x, math.log(span) + log_jac_logistic
         if kind == "log":
             return self.low + jnp.exp(u), u
