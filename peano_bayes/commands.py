@@ -5,8 +5,8 @@ from __future__ import annotations
 from .cli import command
 
 
-@command("run", "the main job (for now: a forward-model demo of the default four-tube muscle)")
-def run(args):
+@command("demo", "forward-model demo: blocking force and free strain of the default four-tube muscle")
+def demo(args):
     from .demo import blocking_and_free_strain
 
     rows = blocking_and_free_strain(args.pressures_kpa)
@@ -17,7 +17,7 @@ def run(args):
     return {"demo": rows}
 
 
-run.arguments = lambda p: p.add_argument(
+demo.arguments = lambda p: p.add_argument(
     "--pressures-kpa",
     type=float,
     nargs="+",
@@ -156,3 +156,120 @@ def _simulate_arguments(p):
 
 
 simulate.arguments = _simulate_arguments
+
+
+def _sampling_arguments(p):
+    from .pipeline import ALL_TESTS, DEFAULT_TESTS
+
+    p.add_argument("--seed", type=int, default=0, help="seed of the starts and the sampler (default: 0)")
+    p.add_argument(
+        "--tests",
+        nargs="+",
+        default=list(DEFAULT_TESTS),
+        choices=ALL_TESTS,
+        metavar="TEST",
+        help=f"tests to fit (default: {' '.join(DEFAULT_TESTS)}; the step response is ~20x dearer)",
+    )
+    p.add_argument("--starts", type=int, default=16, help="least-squares starts (default: 16)")
+    p.add_argument("--walkers", type=int, default=None, help="emcee walkers (default: max(32, 2 x parameters + 2))")
+    p.add_argument("--chunk", type=int, default=500, help="steps between saved states and checks (default: 500)")
+    p.add_argument("--max-steps", type=int, default=20_000, help="step limit; beyond it the run is unconverged")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.add_argument(
+        "--sample-all",
+        action="store_true",
+        help="also sample the shape constants held at nominal by default (slow mixing; see README)",
+    )
+
+
+def _check_sampling(args):
+    from .errors import PeanoBayesInputError
+
+    for name in ("starts", "chunk", "max_steps"):
+        if getattr(args, name) < 1:
+            raise PeanoBayesInputError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
+    if args.walkers is not None and args.walkers < 4:
+        raise PeanoBayesInputError(f"--walkers must be >= 4, got {args.walkers}")
+    return dict(
+        seed=args.seed,
+        tests=tuple(args.tests),
+        n_starts=args.starts,
+        n_walkers=args.walkers,
+        chunk=args.chunk,
+        max_steps=args.max_steps,
+        progress=not args.no_progress,
+        sample_all=args.sample_all,
+    )
+
+
+def _report(summary: dict) -> dict:
+    conv = summary["convergence"]
+    return {
+        "material": summary["material"],
+        "converged": conv["converged"],
+        "problems": conv["problems"],
+        "steps": summary["steps"],
+        "max_rhat": max(conv["rhat"].values()),
+        "min_ess_bulk": min(conv["ess_bulk"].values()),
+        "timings_s": summary["timings_s"],
+    }
+
+
+@command("fit", "one dataset: multi-start least squares, then MCMC (emcee), into --out DIR/<code>/ (resumable)")
+def fit_command(args):
+    from .data import load
+    from .pipeline import infer
+
+    options = _check_sampling(args)
+    dataset = load(args.data)  # validate before anything is written
+    summary = infer(dataset, args.out, resume=args.resume, **options)
+    report = _report(summary)
+    if not report["converged"]:
+        print(f"peano-bayes fit: WARNING: {summary['material']} did NOT converge: {'; '.join(report['problems'])}")
+    return report
+
+
+def _fit_arguments(p):
+    p.add_argument("data", metavar="DATA.csv", help="the dataset CSV (with its TOML sidecar)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output directory (results go to DIR/<code>/)")
+    p.add_argument("--resume", action="store_true", help="continue an interrupted run from its saved state")
+    _sampling_arguments(p)
+
+
+fit_command.arguments = _fit_arguments
+
+
+@command("run", "the main job: every bundled material, fit + sample into results/ with results/index.md")
+def run(args):
+    from .pipeline import BUNDLED_MATERIALS, run_bundled
+
+    options = _check_sampling(args)
+    materials = tuple(args.materials)
+    unknown = [m for m in materials if m not in BUNDLED_MATERIALS]
+    if unknown:
+        from .errors import PeanoBayesInputError
+
+        raise PeanoBayesInputError(f"unknown material(s) {', '.join(unknown)}; bundled: {' '.join(BUNDLED_MATERIALS)}")
+    if args.jobs < 1:
+        from .errors import PeanoBayesInputError
+
+        raise PeanoBayesInputError(f"--jobs must be >= 1, got {args.jobs}")
+    summaries = run_bundled(args.out, materials=materials, jobs=args.jobs, **options)
+    reports = [_report(s) for s in summaries]
+    bad = [r["material"] for r in reports if not r["converged"]]
+    print(f"wrote {args.out}/index.md: {len(reports) - len(bad)} of {len(reports)} materials converged")
+    if bad:
+        print(f"peano-bayes run: WARNING: NOT CONVERGED: {', '.join(bad)} (see {args.out}/index.md)")
+    return {"materials": reports, "converged": not bad}
+
+
+def _run_arguments(p):
+    from .pipeline import BUNDLED_MATERIALS
+
+    p.add_argument("--out", default="results", metavar="DIR", help="output directory (default: results)")
+    p.add_argument("--materials", nargs="+", default=list(BUNDLED_MATERIALS), metavar="CODE", help="subset to run")
+    p.add_argument("--jobs", type=int, default=2, help="materials run at once, one process each (default: 2)")
+    _sampling_arguments(p)
+
+
+run.arguments = _run_arguments

@@ -1,4 +1,5 @@
-"""Inference: priors as data (``priors/*.toml``), the likelihood of rig data, multi-start least squares."""
+"""Inference: priors as data (``priors/*.toml``), the likelihood of rig data, the posterior, multi-start least
+squares, resumable emcee sampling and arviz results."""
 
 from .fit import DEFAULT_NOISE, FitResult, fit, fit_quality
 from .likelihood import (
@@ -12,6 +13,7 @@ from .likelihood import (
     predict,
     prepare,
 )
+from .posterior import Posterior, build_posterior
 from .priors import (
     ALL_PARAMETERS,
     DEFAULT_PRIORS_DIR,
@@ -23,9 +25,16 @@ from .priors import (
     prior_files,
     prior_for,
 )
+from .sample import Convergence, SampleResult, convergence, sample
 
 __all__ = [
     "ALL_PARAMETERS",
+    "Convergence",
+    "Posterior",
+    "SampleResult",
+    "build_posterior",
+    "convergence",
+    "sample",
     "DEFAULT_NOISE",
     "FitResult",
     "fit",

@@ -1,0 +1,173 @@
+"""Results of one dataset: an arviz ``InferenceData`` (``posterior.nc``) and ``summary.json``, written atomically.
+
+Groups: ``posterior`` (kept draws, thinned to at most :data:`MAX_DRAWS_PER_WALKER` per walker; values in SI
+units under the parameter names, walkers as chains), ``sample_stats`` (``lp``), ``prior`` (draws from the prior
+file), and, on an evenly spaced subset of :data:`POINTWISE_DRAWS_PER_WALKER` draws per walker (their ``draw``
+coordinate says which), ``log_likelihood`` (``y``: every measured bin) and ``posterior_predictive`` (``y``: the
+prediction plus Gaussian noise of the bin's scale), with ``observed_data`` (``y`` and, per bin, its test,
+specimen, run, time and raw-sample count). ``attrs`` hold the seed, package versions, the model configuration,
+the prior files' text and the convergence verdict.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+from importlib import metadata
+from pathlib import Path
+
+import arviz as az
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .likelihood import OBSERVED, predict
+from .posterior import Posterior
+from .sample import SampleResult
+
+MAX_DRAWS_PER_WALKER = 250
+POINTWISE_DRAWS_PER_WALKER = 8
+PRIOR_DRAWS = 1000
+PACKAGES = ("peano_bayes", "jax", "optimistix", "emcee", "arviz", "numpy")
+
+
+def package_versions() -> dict[str, str]:
+    out = {}
+    for name in PACKAGES:
+        try:
+            out[name] = metadata.version(name.replace("_", "-"))
+        except metadata.PackageNotFoundError:
+            out[name] = "not installed"
+    return out
+
+
+def physical_draws(posterior: Posterior, thetas: np.ndarray) -> dict[str, np.ndarray]:
+    """name -> values [SI] for thetas (..., D): the prior's parameters in SI, contrasts as they are."""
+    d = posterior.prior.ndim
+    out = {k: np.asarray(v) for k, v in posterior.prior.from_unconstrained(thetas[..., :d]).items()}
+    for j, name in enumerate(posterior.names[d:]):
+        out[name] = np.asarray(thetas[..., d + j])
+    return out
+
+
+def _predictions(posterior: Posterior, thetas: np.ndarray, rng: np.random.Generator):
+    """Pointwise log-likelihood and predictive draws (n, n_bins) at thetas (n, D)."""
+    obs = posterior.observations
+
+    def one(theta):
+        params = posterior.params(theta)
+        preds, scales = [], []
+        for group in obs.groups:
+            predicted, _ = predict(params, group, config=posterior.config, geometry=obs.geometry)
+            scale = params[OBSERVED[group.test][1]] / np.sqrt(np.maximum(group.counts, 1.0))
+            ok = np.isfinite(group.observed)
+            preds.append(predicted[ok])
+            scales.append(scale[ok])
+        return jnp.concatenate(preds), jnp.concatenate(scales), posterior.pointwise(theta)
+
+    f = jax.jit(jax.vmap(one))
+    outs = [f(thetas[i : i + 64]) for i in range(0, thetas.shape[0], 64)]
+    mean, scale, ll = (np.concatenate([np.asarray(o[k]) for o in outs]) for k in range(3))
+    return ll, mean + scale * rng.standard_normal(mean.shape)
+
+
+def to_inference_data(posterior: Posterior, result: SampleResult, *, seed: int, attrs: dict | None = None):
+    """The :mod:`arviz` InferenceData of a sampling run (see the module docstring)."""
+    kept = result.kept()  # (walkers, steps, D)
+    thin = max(1, int(np.ceil(kept.shape[1] / MAX_DRAWS_PER_WALKER)))
+    draws = np.arange(0, kept.shape[1], thin)
+    kept = kept[:, draws]
+    lp = result.log_prob[result.convergence.discard :].T[:, draws]
+    walkers, n_draws, ndim = kept.shape
+    every = max(1, n_draws // POINTWISE_DRAWS_PER_WALKER)
+    subset = np.arange(n_draws - 1, -1, -every)[:POINTWISE_DRAWS_PER_WALKER][::-1]
+    rng = np.random.default_rng([seed, 2])
+    ll, yrep = _predictions(posterior, kept[:, subset].reshape(-1, ndim), rng)
+    n_bins = ll.shape[-1]
+    ll = ll.reshape(walkers, subset.size, n_bins)
+    yrep = yrep.reshape(walkers, subset.size, n_bins)
+    observed = posterior.observed()
+    prior_theta = posterior.prior.sample(np.random.default_rng([seed, 3]), PRIOR_DRAWS)
+    prior_draws = {k: np.asarray(v)[None] for k, v in posterior.prior.from_unconstrained(prior_theta).items()}
+    post_draws = physical_draws(posterior, kept)
+    bin_coords = {"bin": np.arange(n_bins)}
+    idata = az.from_dict(
+        posterior=post_draws,
+        sample_stats={"lp": lp},
+        coords={"draw": draws + result.convergence.discard},
+        attrs=_attrs(posterior, result, seed, attrs),
+    )
+    pointwise = az.from_dict(
+        log_likelihood={"y": ll},
+        posterior_predictive={"y": yrep},
+        observed_data={
+            "y": observed["value"],
+            "test": observed["test"],
+            "specimen": observed["specimen"],
+            "run": observed["run"],
+            "time_s": observed["time_s"],
+            "count": observed["count"],
+            "unit": observed["unit"],
+        },
+        coords={**bin_coords, "draw": draws[subset] + result.convergence.discard},
+        dims={k: ["bin"] for k in ("y", "test", "specimen", "run", "time_s", "count", "unit")},
+    )
+    idata.extend(pointwise)
+    idata.extend(az.from_dict(prior=prior_draws))
+    return idata
+
+
+def _attrs(posterior: Posterior, result: SampleResult, seed: int, extra: dict | None) -> dict:
+    return {
+        "seed": seed,
+        "package_versions": json.dumps(package_versions()),
+        "model_config": json.dumps(dataclasses.asdict(posterior.config)),
+        "fixed_parameters": json.dumps(posterior.fixed),
+        "prior_files": json.dumps([str(p) for p in posterior.prior.files]),
+        "prior_text": posterior.prior.text,
+        "likelihood_family": posterior.family,
+        "bin_sizes": json.dumps(dict(posterior.observations.bin_sizes)),
+        "converged": int(result.convergence.converged),
+        "units": json.dumps(
+            {**dict(posterior.prior.units), **{n: "-" for n in posterior.names[posterior.prior.ndim :]}}
+        ),
+        **(extra or {}),
+    }
+
+
+def write_atomic_text(path: Path, text: str) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def write_netcdf(idata, path: Path) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    idata.to_netcdf(str(tmp))
+    os.replace(tmp, path)
+
+
+def parameter_table(idata, names, hdi_prob: float = 0.94) -> dict:
+    """name -> mean, sd, HDI bounds, R-hat and bulk ESS of the stored posterior (arviz)."""
+    table = az.summary(idata, var_names=list(names), hdi_prob=hdi_prob, round_to="none")
+    low, high = (c for c in table.columns if c.startswith("hdi_"))
+    return {
+        name: {
+            "mean": float(row["mean"]),
+            "sd": float(row["sd"]),
+            "hdi_low": float(row[low]),
+            "hdi_high": float(row[high]),
+        }
+        for name, row in table.iterrows()
+    }
+
+
+__all__ = [
+    "package_versions",
+    "parameter_table",
+    "physical_draws",
+    "to_inference_data",
+    "write_atomic_text",
+    "write_netcdf",
+]

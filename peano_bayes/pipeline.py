@@ -1,0 +1,304 @@
+"""The inference pipeline of one dataset, and of the bundled eight: rig file -> fit -> sample -> results.
+
+:func:`infer` is what ``peano-bayes fit`` runs; :func:`run_bundled` is ``peano-bayes run``. Output layout
+(DESIGN.md §4): ``OUT/<code>/posterior.nc``, ``OUT/<code>/summary.json``, and ``OUT/index.md`` for a run.
+While sampling, ``OUT/<code>/sampler_state.npz`` holds every finished chunk and ``fit.json`` the least-squares
+start; ``resume=True`` continues from them.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .data import Dataset, load
+from .errors import PeanoBayesInputError
+from .inference.fit import fit, fit_quality
+from .inference.likelihood import prepare
+from .inference.posterior import CONTRAST_PREFIX, DEFAULT_HELD, SPECIMEN_SD, build_posterior
+from .inference.priors import prior_for
+from .inference.results import (
+    parameter_table,
+    physical_draws,
+    to_inference_data,
+    write_atomic_text,
+    write_netcdf,
+)
+from .inference.sample import sample
+
+#: Tests fitted by default. The step response costs ~20x the three quasi-static tests together per
+#: evaluation (45 ms per walker on one core, see README), so it is opt-in (``tests=ALL_TESTS``).
+DEFAULT_TESTS = ("load_cycle", "blocking", "stroke")
+ALL_TESTS = ("load_cycle", "blocking", "stroke", "step")
+#: Where the bundled datasets live.
+BUNDLED_DIR = Path(__file__).resolve().parents[1] / "experiments" / "data"
+BUNDLED_MATERIALS = ("TP", "P", "PR", "TPC", "PC", "PCS", "TFC", "FC")
+HDI_PROB = 0.94
+
+
+def default_walkers(ndim: int) -> int:
+    """Walkers by default: ``max(32, 2 ndim + 2)``. With 50 autocorrelation times required, 32 walkers
+    already give an ESS near 1600; more walkers only cost more per step."""
+    return max(32, 2 * ndim + 2)
+
+
+def _select_tests(dataset: Dataset, tests) -> Dataset:
+    tests = tuple(tests)
+    unknown = [t for t in tests if t not in ALL_TESTS]
+    if unknown:
+        raise PeanoBayesInputError(f"unknown test(s) {', '.join(unknown)}; expected some of {', '.join(ALL_TESTS)}")
+    runs = [r for r in dataset.runs if r.test in tests]
+    if not runs:
+        raise PeanoBayesInputError(
+            f"{dataset.source_path}: no runs of {', '.join(tests)}; the file has {', '.join(dataset.tests)}"
+        )
+    return Dataset(dataset.material, dataset.geometry, dataset.conditions, runs, dataset.provenance)
+
+
+def _start(posterior, fitted) -> tuple[np.ndarray, np.ndarray]:
+    """Centre and covariance in theta for the walkers: the fit's point and Laplace covariance for the model
+    parameters, the residual-based noise estimates, and the prior median of the pooling scale."""
+    names = posterior.names
+    centre = np.zeros(len(names))
+    sd = np.full(len(names), 0.05)
+    cov = np.diag(sd**2)
+    fit_names = list(fitted["names"])
+    fit_cov = np.asarray(fitted["covariance"])
+    idx = [names.index(n) for n in fit_names]
+    prior_u = posterior.prior.sample(np.random.default_rng(0), 2000)
+    prior_sd = np.std(prior_u, axis=0)
+    centre_params = {**posterior.prior.median(), **fitted["params"], **fitted["noise_estimate"]}
+    centre[: posterior.prior.ndim] = np.asarray(posterior.prior.to_unconstrained(centre_params))
+    # The Laplace covariance, capped at the prior's spread in each direction.
+    fsd = np.sqrt(np.clip(np.diag(fit_cov), 1e-12, None))
+    cap = np.minimum(fsd, prior_sd[idx]) / fsd
+    cov[np.ix_(idx, idx)] = fit_cov * np.outer(cap, cap)
+    for i, n in enumerate(names):
+        if n == SPECIMEN_SD:
+            cov[i, i] = 0.3**2
+        elif n.startswith(CONTRAST_PREFIX):
+            cov[i, i] = 0.02**2
+    return centre, cov
+
+
+def infer(
+    data: str | Path | Dataset,
+    out_dir: str | Path,
+    *,
+    seed: int = 0,
+    resume: bool = False,
+    tests=DEFAULT_TESTS,
+    n_starts: int = 16,
+    n_walkers: int | None = None,
+    chunk: int = 500,
+    max_steps: int = 20_000,
+    progress: bool = True,
+    sample_all: bool = False,
+    log=print,
+) -> dict:
+    """Fit, sample and write the results of one dataset into ``out_dir/<code>/``; return the summary.
+
+    ``data``: a rig file (CSV with its TOML sidecar) or a :class:`Dataset`. ``tests``: which tests to fit
+    (default :data:`DEFAULT_TESTS`). Sampling runs in chunks of ``chunk`` steps until converged or
+    ``max_steps`` (see :func:`~peano_bayes.inference.sample.sample`). ``resume`` continues an interrupted run.
+    ``sample_all`` also samples the shape constants held by default
+    (:data:`~peano_bayes.inference.posterior.DEFAULT_HELD`).
+    """
+    timings = {}
+    dataset = load(data) if not isinstance(data, Dataset) else data
+    dataset = _select_tests(dataset, tests)
+    code = dataset.material.code
+    prior = prior_for(code)
+    config = prior.config
+    out = Path(out_dir) / code
+    out.mkdir(parents=True, exist_ok=True)
+    observations = prepare(dataset)
+    posterior = build_posterior(observations, prior, config=config, held=() if sample_all else DEFAULT_HELD)
+    log(
+        f"{code}: {observations.n_bins} bins from {len(dataset.runs)} runs ({', '.join(dataset.tests)}); "
+        f"{posterior.ndim} parameters sampled"
+    )
+
+    fit_path, state_path = out / "fit.json", out / "sampler_state.npz"
+    if resume and fit_path.exists():
+        fitted = json.loads(fit_path.read_text())
+        timings["least_squares_s"] = fitted["seconds"]
+        log(f"{code}: least squares loaded from {fit_path}")
+    else:
+        for stale in (fit_path, state_path):
+            stale.unlink(missing_ok=True)
+        model_names = [n for n in posterior.prior.names if n in config.parameter_names()]
+        log(f"{code}: least squares from {n_starts} starts ...")
+        result = fit(
+            observations,
+            prior.select(model_names),
+            config=config,
+            n_starts=n_starts,
+            seed=seed,
+            fixed=posterior.fixed,
+        )
+        fitted = {
+            "names": list(result.names),
+            "params": result.params,
+            "covariance": result.covariance.tolist(),
+            "noise_estimate": result.noise_estimate,
+            "cost": result.cost,
+            "n_starts": result.n_starts,
+            "n_failed": result.n_failed,
+            "quality": result.quality,
+            "seconds": result.seconds,
+        }
+        write_atomic_text(fit_path, json.dumps(fitted, indent=1))
+        timings["least_squares_s"] = result.seconds
+        log(f"{code}: least squares done in {result.seconds:.1f} s ({result.n_failed} of {n_starts} starts failed)")
+
+    centre, covariance = _start(posterior, fitted)
+    t0 = time.perf_counter()
+    n_walkers = n_walkers or default_walkers(posterior.ndim)
+    n_walkers += n_walkers % 2
+    warm = np.tile(centre, (n_walkers, 1))
+    posterior.batched(warm)
+    posterior.batched(warm[: n_walkers // 2])
+    timings["compile_s"] = time.perf_counter() - t0
+    result = sample(
+        posterior,
+        centre,
+        covariance,
+        n_walkers=n_walkers,
+        seed=seed,
+        chunk=chunk,
+        max_steps=max_steps,
+        state_path=state_path,
+        resume=resume,
+        progress=progress,
+        log=lambda m: log(f"{code}: {m}"),
+    )
+    timings["sampling_s"] = result.seconds
+    conv = result.convergence
+    if not conv.converged:
+        log(f"{code}: WARNING: NOT CONVERGED after {result.chain.shape[0]} steps: {'; '.join(conv.problems)}")
+    idata = to_inference_data(
+        posterior, result, seed=seed, attrs={"material": code, "dataset": str(dataset.source_path)}
+    )
+    kept_mean = {k: float(np.mean(v)) for k, v in physical_draws(posterior, result.kept()).items()}
+    quality = fit_quality({**posterior.fixed, **kept_mean}, observations, config)
+    summary = {
+        "material": code,
+        "dataset": str(dataset.source_path),
+        "tests": list(dataset.tests),
+        "seed": seed,
+        "n_walkers": n_walkers,
+        "steps": int(result.chain.shape[0]),
+        "resumed_from_step": result.resumed_from,
+        "acceptance": result.acceptance,
+        "convergence": conv.as_dict(posterior.names),
+        "min_ess_per_s": float(np.min(conv.ess_bulk) / max(result.seconds, 1e-9)),
+        "parameters": parameter_table(idata, posterior.names, HDI_PROB),
+        "units": {**dict(posterior.prior.units), **{n: "-" for n in posterior.names[posterior.prior.ndim :]}},
+        "fixed": posterior.fixed,
+        "fit_quality_least_squares": fitted["quality"],
+        "fit_quality_posterior_mean": quality,
+        "least_squares": {k: fitted[k] for k in ("cost", "n_starts", "n_failed", "params")},
+        "timings_s": timings,
+    }
+    write_netcdf(idata, out / "posterior.nc")
+    write_atomic_text(out / "summary.json", json.dumps(summary, indent=1, default=float))
+    state_path.unlink(missing_ok=True)
+    log(f"{code}: wrote {out / 'posterior.nc'} and summary.json")
+    return summary
+
+
+def _fmt(x: float) -> str:
+    return f"{x:.3g}" if math.isfinite(x) else str(x)
+
+
+def index_markdown(summaries: list[dict]) -> str:
+    """``results/index.md``: per material, a parameter table with 94 % intervals, fit quality, convergence."""
+    lines = ["# peano_bayes results", "", "Posterior means with 94 % highest-density intervals (SI units).", ""]
+    for s in summaries:
+        conv = s["convergence"]
+        verdict = "converged" if conv["converged"] else "**NOT CONVERGED**: " + "; ".join(conv["problems"])
+        lines += [
+            f"## {s['material']}",
+            "",
+            f"Data: `{s['dataset']}` ({', '.join(s['tests'])}); {s['n_walkers']} walkers x {s['steps']} steps; "
+            f"{verdict}. Max R-hat {max(conv['rhat'].values()):.3f}, "
+            f"min bulk ESS {min(conv['ess_bulk'].values()):.0f}, "
+            f"chain {conv['tau_lengths']:.0f} autocorrelation times long.",
+            "",
+            "| parameter | unit | mean | 94 % interval | R-hat | bulk ESS |",
+            "|---|---|---|---|---|---|",
+        ]
+        for name, row in s["parameters"].items():
+            lines.append(
+                f"| {name} | {s['units'].get(name, '')} | {_fmt(row['mean'])} | "
+                f"{_fmt(row['hdi_low'])} to {_fmt(row['hdi_high'])} | {conv['rhat'][name]:.3f} | "
+                f"{conv['ess_bulk'][name]:.0f} |"
+            )
+        lines += ["", "| test | RMSE | max error | R² |", "|---|---|---|---|"]
+        for test, q in s["fit_quality_posterior_mean"].items():
+            lines.append(
+                f"| {test} | {_fmt(q['rmse'])} {q['unit']} | {_fmt(q['max_error'])} {q['unit']} | {q['r2']:.4f} |"
+            )
+        t = s["timings_s"]
+        lines += [
+            "",
+            f"Timings: compile {t['compile_s']:.1f} s, least squares {t['least_squares_s']:.1f} s, "
+            f"sampling {t['sampling_s']:.1f} s.",
+            "",
+        ]
+    return "\n".join(lines)
+
+
+def _infer_bundled(code: str, out_dir: str, kwargs: dict) -> dict:
+    """One material of :func:`run_bundled` (top level, so a spawned worker process can run it)."""
+    resume = (Path(out_dir) / code / "sampler_state.npz").exists()
+    return infer(BUNDLED_DIR / f"{code}.csv", out_dir, resume=resume, **kwargs)
+
+
+def run_bundled(
+    out_dir: str | Path = "results", *, materials=BUNDLED_MATERIALS, jobs: int = 1, log=print, **kwargs
+) -> list[dict]:
+    """The main job: :func:`infer` on every bundled dataset, then ``out_dir/index.md``.
+
+    A material whose ``summary.json`` exists is not redone (delete it to redo); one with a saved sampler state
+    resumes. ``jobs`` materials run at once, each in its own process (spawned: JAX must not be forked), with
+    per-chunk log lines instead of progress bars. ``kwargs`` go to :func:`infer`.
+    """
+    out_dir = Path(out_dir)
+    summaries: dict[str, dict] = {}
+    todo = []
+    for code in materials:
+        done = out_dir / code / "summary.json"
+        if done.exists():
+            log(f"{code}: {done} exists, skipped")
+            summaries[code] = json.loads(done.read_text())
+        else:
+            todo.append(code)
+
+    def finished(code, summary):
+        summaries[code] = summary
+        write_atomic_text(out_dir / "index.md", index_markdown([summaries[c] for c in materials if c in summaries]))
+
+    if jobs <= 1 or len(todo) <= 1:
+        for code in todo:
+            finished(code, _infer_bundled(code, str(out_dir), {**kwargs, "log": log}))
+    else:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        kwargs = {**kwargs, "progress": False}
+        with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+            futures = {pool.submit(_infer_bundled, code, str(out_dir), kwargs): code for code in todo}
+            for future in as_completed(futures):
+                finished(futures[future], future.result())
+    ordered = [summaries[c] for c in materials if c in summaries]
+    write_atomic_text(out_dir / "index.md", index_markdown(ordered))
+    return ordered
+
+
+__all__ = ["ALL_TESTS", "BUNDLED_MATERIALS", "DEFAULT_TESTS", "index_markdown", "infer", "run_bundled"]
