@@ -8,6 +8,7 @@ start; ``resume=True`` continues from them.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import time
@@ -23,7 +24,6 @@ from .inference.posterior import CONTRAST_PREFIX, DEFAULT_HELD, SPECIMEN_SD, bui
 from .inference.priors import prior_for
 from .inference.results import (
     parameter_table,
-    physical_draws,
     to_inference_data,
     write_atomic_text,
     write_netcdf,
@@ -51,15 +51,42 @@ def _select_tests(dataset: Dataset, tests) -> Dataset:
     unknown = [t for t in tests if t not in ALL_TESTS]
     if unknown:
         raise PeanoBayesInputError(f"unknown test(s) {', '.join(unknown)}; expected some of {', '.join(ALL_TESTS)}")
-    runs = [r for r in dataset.runs if r.test in tests]
+    runs = tuple(r for r in dataset.runs if r.test in tests)
     if not runs:
         raise PeanoBayesInputError(
             f"{dataset.source_path}: no runs of {', '.join(tests)}; the file has {', '.join(dataset.tests)}"
         )
-    return Dataset(dataset.material, dataset.geometry, dataset.conditions, runs, dataset.provenance)
+    return dataclasses.replace(dataset, runs=runs)
 
 
-def _start(posterior, fitted) -> tuple[np.ndarray, np.ndarray]:
+def least_squares(posterior, prior, *, n_starts: int = 16, seed: int = 0) -> dict:
+    """Multi-start least squares over the model parameters ``posterior`` samples (``prior``: the full prior
+    they come from), the rest held as in ``posterior``; a JSON-ready dict of the result."""
+    config = posterior.config
+    model_names = [n for n in posterior.prior.names if n in config.parameter_names()]
+    result = fit(
+        posterior.observations,
+        prior.select(model_names),
+        config=config,
+        n_starts=n_starts,
+        seed=seed,
+        fixed=posterior.fixed,
+    )
+    return {
+        "names": list(result.names),
+        "params": result.params,
+        "covariance": result.covariance.tolist(),
+        "noise_estimate": result.noise_estimate,
+        "cost": result.cost,
+        "n_starts": result.n_starts,
+        "n_failed": result.n_failed,
+        "start_costs": result.start_costs.tolist(),
+        "quality": result.quality,
+        "seconds": result.seconds,
+    }
+
+
+def walker_start(posterior, fitted: dict) -> tuple[np.ndarray, np.ndarray]:
     """Centre and covariance in theta for the walkers: the fit's point and Laplace covariance for the model
     parameters, the residual-based noise estimates, and the prior median of the pooling scale."""
     names = posterior.names
@@ -131,32 +158,16 @@ def infer(
     else:
         for stale in (fit_path, state_path):
             stale.unlink(missing_ok=True)
-        model_names = [n for n in posterior.prior.names if n in config.parameter_names()]
         log(f"{code}: least squares from {n_starts} starts ...")
-        result = fit(
-            observations,
-            prior.select(model_names),
-            config=config,
-            n_starts=n_starts,
-            seed=seed,
-            fixed=posterior.fixed,
-        )
-        fitted = {
-            "names": list(result.names),
-            "params": result.params,
-            "covariance": result.covariance.tolist(),
-            "noise_estimate": result.noise_estimate,
-            "cost": result.cost,
-            "n_starts": result.n_starts,
-            "n_failed": result.n_failed,
-            "quality": result.quality,
-            "seconds": result.seconds,
-        }
+        fitted = least_squares(posterior, prior, n_starts=n_starts, seed=seed)
         write_atomic_text(fit_path, json.dumps(fitted, indent=1))
-        timings["least_squares_s"] = result.seconds
-        log(f"{code}: least squares done in {result.seconds:.1f} s ({result.n_failed} of {n_starts} starts failed)")
+        timings["least_squares_s"] = fitted["seconds"]
+        log(
+            f"{code}: least squares done in {fitted['seconds']:.1f} s "
+            f"({fitted['n_failed']} of {n_starts} starts failed)"
+        )
 
-    centre, covariance = _start(posterior, fitted)
+    centre, covariance = walker_start(posterior, fitted)
     t0 = time.perf_counter()
     n_walkers = n_walkers or default_walkers(posterior.ndim)
     n_walkers += n_walkers % 2
@@ -184,8 +195,9 @@ def infer(
     idata = to_inference_data(
         posterior, result, seed=seed, attrs={"material": code, "dataset": str(dataset.source_path)}
     )
-    kept_mean = {k: float(np.mean(v)) for k, v in physical_draws(posterior, result.kept()).items()}
-    quality = fit_quality({**posterior.fixed, **kept_mean}, observations, config)
+    # Fit quality at the posterior mean in theta (unconstrained) space, specimen offsets included.
+    theta_mean = result.kept().reshape(-1, posterior.ndim).mean(axis=0)
+    quality = fit_quality(posterior.params(theta_mean), observations, config)
     summary = {
         "material": code,
         "dataset": str(dataset.source_path),
@@ -301,4 +313,13 @@ def run_bundled(
     return ordered
 
 
-__all__ = ["ALL_TESTS", "BUNDLED_MATERIALS", "DEFAULT_TESTS", "index_markdown", "infer", "run_bundled"]
+__all__ = [
+    "ALL_TESTS",
+    "BUNDLED_MATERIALS",
+    "DEFAULT_TESTS",
+    "index_markdown",
+    "infer",
+    "least_squares",
+    "run_bundled",
+    "walker_start",
+]

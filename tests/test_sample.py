@@ -172,3 +172,16 @@ def test_killed_fit_resumes_without_losing_a_chunk(tmp_path):
     assert summary["resumed_from_step"] == saved_now and saved_now % 40 == 0
     assert f"resumed from {state} at step {saved_now}" in done.stdout
     assert (out / "TP" / "posterior.nc").exists() and not state.exists()
+    # The result file: all six groups, provenance attrs, pointwise arrays aligned with the observed bins.
+    import arviz as az
+
+    idata = az.from_netcdf(out / "TP" / "posterior.nc")
+    for group in ("posterior", "sample_stats", "log_likelihood", "posterior_predictive", "observed_data", "prior"):
+        assert group in idata.groups(), group
+    attrs = idata.posterior.attrs
+    assert attrs["seed"] == 4 and "emcee" in json.loads(attrs["package_versions"])
+    assert "[parameters." in attrs["prior_text"] and "friction" in json.loads(attrs["model_config"])
+    n_bins = idata.observed_data["y"].size
+    assert idata.log_likelihood["y"].shape[-1] == n_bins == idata.posterior_predictive["y"].shape[-1]
+    assert np.all(np.isfinite(idata.log_likelihood["y"].values))
+    assert set(summary["timings_s"]) == {"least_squares_s", "compile_s", "sampling_s"}

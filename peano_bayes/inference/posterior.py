@@ -122,7 +122,7 @@ class Posterior:
         cols: dict[str, list] = {k: [] for k in ("value", "test", "specimen", "run", "time_s", "count", "unit")}
         for g in self.observations.groups:
             ok = np.isfinite(g.observed)
-            time_s = g.time_s[g.shared]
+            time_s = g.bin_time_s[g.shared]
             for r, key in enumerate(g.keys):
                 n = int(ok[r].sum())
                 cols["value"].append(g.observed[r][ok[r]])

@@ -5,8 +5,8 @@ units under the parameter names, walkers as chains), ``sample_stats`` (``lp``), 
 file), and, on an evenly spaced subset of :data:`POINTWISE_DRAWS_PER_WALKER` draws per walker (their ``draw``
 coordinate says which), ``log_likelihood`` (``y``: every measured bin) and ``posterior_predictive`` (``y``: the
 prediction plus Gaussian noise of the bin's scale), with ``observed_data`` (``y`` and, per bin, its test,
-specimen, run, time and raw-sample count). ``attrs`` hold the seed, package versions, the model configuration,
-the prior files' text and the convergence verdict.
+specimen, run, time and raw-sample count). Every group's ``attrs`` hold the seed, package versions, the model
+configuration, the prior files' text and the convergence verdict.
 """
 
 from __future__ import annotations
@@ -96,7 +96,6 @@ def to_inference_data(posterior: Posterior, result: SampleResult, *, seed: int, 
         posterior=post_draws,
         sample_stats={"lp": lp},
         coords={"draw": draws + result.convergence.discard},
-        attrs=_attrs(posterior, result, seed, attrs),
     )
     pointwise = az.from_dict(
         log_likelihood={"y": ll},
@@ -115,6 +114,9 @@ def to_inference_data(posterior: Posterior, result: SampleResult, *, seed: int, 
     )
     idata.extend(pointwise)
     idata.extend(az.from_dict(prior=prior_draws))
+    provenance = _attrs(posterior, result, seed, attrs)
+    for group in idata.groups():
+        getattr(idata, group).attrs.update(provenance)
     return idata
 
 
