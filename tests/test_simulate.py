@@ -123,6 +123,18 @@ def _elastic_cycle(params, pressure_pa):
     return low.force_n, high.force_n, low.max_residual, high.max_residual
 
 
+@pytest.mark.xfail(
+    strict=True,
+    reason="KNOWN (issue 2, open): at this corner of the box (bending k2 500 N with exponent 1, tensile kb 1e10 "
+    "N/m^2, ka 100 N/m, length fraction 0.3, 10 kPa) the load cycle's solver stops at 9.2e-8 m although the "
+    "half-angle stays inside its range (6e-4 to 0.02 rad); the property test below met it in a full-suite run",
+)
+def test_solver_converges_at_the_stiff_bending_corner():
+    params = {k: jnp.asarray(v) for k, v in box_point([0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.0], ELASTIC_CONFIG).items()}
+    _, _, err_low, _ = (np.asarray(a) for a in _elastic_cycle(params, 1e4))
+    assert err_low < 1e-10
+
+
 @settings(max_examples=25, deadline=None)
 @given(
     st.lists(
