@@ -151,8 +151,8 @@ def main() -> None:
     ours_lp = posterior.batched(probe)
     np_lp = np.array([logp_np(t) for t in probe])
     agreement = float(np.max(np.abs(np_lp - ours_lp)))
-    np.random.seed(SEED)
     sampler = emcee.EnsembleSampler(WALKERS, posterior.ndim, logp_np, moves=[(m(), w) for m, w in MOVES])
+    sampler.random_state = np.random.RandomState(SEED).get_state()  # as peano_bayes.inference.sample does
     t0 = time.perf_counter()
     sampler.run_mcmc(probe, args.numpy_steps, progress=False)
     numpy_per_step = (time.perf_counter() - t0) / args.numpy_steps
@@ -164,7 +164,8 @@ def main() -> None:
     nuts_rate = nuts["min_ess"] / nuts["seconds"]
 
     print(f"machine: {platform.processor() or platform.machine()}, jax {jax.__version__}, emcee {emcee.__version__}")
-    print(f"density: {posterior.ndim} parameters, {posterior.observations.n_bins} bins; NumPy agrees to {agreement:.2e}")
+    n_bins = posterior.observations.n_bins
+    print(f"density: {posterior.ndim} parameters, {n_bins} bins; NumPy agrees to {agreement:.2e}")
     print(f"{'sampler':<34} {'wall [s]':>10} {'min bulk ESS':>13} {'ESS/s':>10}")
     print(f"{'ours: emcee + jit/vmap':<34} {ours.seconds:10.1f} {ours_ess:13.0f} {ours_rate:10.2f}"
           f"   ({steps} steps, converged={ours.convergence.converged}, compile {compile_s:.1f} s apart)")

@@ -28,7 +28,7 @@ from .inference.results import (
     write_atomic_text,
     write_netcdf,
 )
-from .inference.sample import sample
+from .inference.sample import sample, walker_count
 
 #: Tests fitted by default. The step response costs ~20x the three quasi-static tests together per
 #: evaluation (45 ms per walker on one core, see README), so it is opt-in (``tests=ALL_TESTS``).
@@ -38,12 +38,6 @@ ALL_TESTS = ("load_cycle", "blocking", "stroke", "step")
 BUNDLED_DIR = Path(__file__).resolve().parents[1] / "experiments" / "data"
 BUNDLED_MATERIALS = ("TP", "P", "PR", "TPC", "PC", "PCS", "TFC", "FC")
 HDI_PROB = 0.94
-
-
-def default_walkers(ndim: int) -> int:
-    """Walkers by default: ``max(32, 2 ndim + 2)``. With 50 autocorrelation times required, 32 walkers
-    already give an ESS near 1600; more walkers only cost more per step."""
-    return max(32, 2 * ndim + 2)
 
 
 def _select_tests(dataset: Dataset, tests) -> Dataset:
@@ -169,8 +163,7 @@ def infer(
 
     centre, covariance = walker_start(posterior, fitted)
     t0 = time.perf_counter()
-    n_walkers = n_walkers or default_walkers(posterior.ndim)
-    n_walkers += n_walkers % 2
+    n_walkers = walker_count(n_walkers, posterior.ndim)
     warm = np.tile(centre, (n_walkers, 1))
     posterior.batched(warm)
     posterior.batched(warm[: n_walkers // 2])
@@ -210,7 +203,7 @@ def infer(
         "convergence": conv.as_dict(posterior.names),
         "min_ess_per_s": float(np.min(conv.ess_bulk) / max(result.seconds, 1e-9)),
         "parameters": parameter_table(idata, posterior.names, HDI_PROB),
-        "units": {**dict(posterior.prior.units), **{n: "-" for n in posterior.names[posterior.prior.ndim :]}},
+        "units": posterior.units,
         "fixed": posterior.fixed,
         "fit_quality_least_squares": fitted["quality"],
         "fit_quality_posterior_mean": quality,

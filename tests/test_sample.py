@@ -79,33 +79,10 @@ def test_resume_continues_bit_identically(tmp_path):
 
 def test_resume_refuses_a_state_of_another_run(tmp_path):
     g = Gaussian()
-    state = tmp_path / "state.npz"
-    sample(
-        g,
-        g.mean,
-        0.05 * np.eye(3),
-        n_walkers=8,
-        seed=1,
-        chunk=20,
-        max_steps=20,
-        state_path=state,
-        progress=False,
-        log=lambda m: None,
-    )
+    kw = dict(n_walkers=8, chunk=20, state_path=tmp_path / "state.npz", progress=False, log=lambda m: None)
+    sample(g, g.mean, 0.05 * np.eye(3), seed=1, max_steps=20, **kw)
     with pytest.raises(ValueError, match="another run"):
-        sample(
-            g,
-            g.mean,
-            0.05 * np.eye(3),
-            n_walkers=8,
-            seed=2,
-            chunk=20,
-            max_steps=40,
-            state_path=state,
-            resume=True,
-            progress=False,
-            log=lambda m: None,
-        )
+        sample(g, g.mean, 0.05 * np.eye(3), seed=2, max_steps=40, resume=True, **kw)
 
 
 def test_convergence_flags_a_stuck_chain():

@@ -18,7 +18,7 @@ import numpy as np
 import optimistix as optx
 
 from ..physics import ModelConfig
-from .likelihood import OBSERVED, SOLVER_TOLERANCE, Observations, predict
+from .likelihood import OBSERVED, SOLVER_TOLERANCE, Observations, bin_noise_sd, predict
 from .priors import Prior
 
 #: Noise scales [per raw sample] used to weight the residuals when none are given.
@@ -62,23 +62,31 @@ def _prior_spread(prior: Prior, seed: int) -> jnp.ndarray:
     return jnp.asarray(np.maximum(np.std(draws, axis=0), 1e-3))
 
 
-def residual_function(observations: Observations, prior: Prior, config: ModelConfig, noise, spread, fixed):
-    """``fn(u, args) -> residuals (n,)`` for optimistix, over the parameters of ``prior`` (the rest ``fixed``)."""
+def _residuals_and_solver_ok(observations: Observations, prior: Prior, config: ModelConfig, noise, spread, fixed):
+    """``evaluate(u) -> (residuals (n,), solver_ok)``: the weighted residuals and whether every simulation met
+    its solver tolerance (:data:`SOLVER_TOLERANCE`), from one simulation."""
     centre = prior.median_unconstrained()
 
-    def fn(u, args):
+    def evaluate(u):
         params = {**fixed, **prior.from_unconstrained(u)}
-        parts = []
+        parts, ok = [], jnp.asarray(True)
         for group in observations.groups:
-            predicted, _ = predict(params, group, config=config, geometry=observations.geometry)
-            scale = noise[OBSERVED[group.test][1]] / jnp.sqrt(jnp.maximum(jnp.asarray(group.counts), 1.0))
+            predicted, errors = predict(params, group, config=config, geometry=observations.geometry)
+            scale = bin_noise_sd(noise[OBSERVED[group.test][1]], group)
             observed = jnp.asarray(group.observed)
             measured = jnp.isfinite(observed)
             parts.append(jnp.where(measured, (jnp.where(measured, observed, 0.0) - predicted) / scale, 0.0).ravel())
+            ok = ok & jnp.all(errors <= SOLVER_TOLERANCE[group.test])
         parts.append((u - centre) / spread)
-        return jnp.concatenate(parts)
+        return jnp.concatenate(parts), ok
 
-    return fn
+    return evaluate
+
+
+def residual_function(observations: Observations, prior: Prior, config: ModelConfig, noise, spread, fixed):
+    """``fn(u, args) -> residuals (n,)`` for optimistix, over the parameters of ``prior`` (the rest ``fixed``)."""
+    evaluate = _residuals_and_solver_ok(observations, prior, config, noise, spread, fixed)
+    return lambda u, args: evaluate(u)[0]
 
 
 def fit_quality(params, observations: Observations, config: ModelConfig) -> dict:
@@ -142,24 +150,16 @@ def fit(
     fixed = {k: jnp.asarray(v) for k, v in {**config.nominal_parameters(), **(fixed or {})}.items()}
     fixed = {k: v for k, v in fixed.items() if k not in prior.names}
     spread = _prior_spread(prior, seed)
-    fn = residual_function(observations, prior, config, noise, spread, fixed)
+    evaluate = _residuals_and_solver_ok(observations, prior, config, noise, spread, fixed)
+    fn = lambda u, args: evaluate(u)[0]  # noqa: E731
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
-
-    def solver_ok(u):
-        params = {**fixed, **prior.from_unconstrained(u)}
-        errors = [predict(params, g, config=config, geometry=observations.geometry)[1] for g in observations.groups]
-        return jnp.all(
-            jnp.stack(
-                [jnp.all(e <= SOLVER_TOLERANCE[g.test]) for e, g in zip(errors, observations.groups, strict=True)]
-            )
-        )
 
     def one(u0):
         sol = optx.least_squares(fn, solver, u0, max_steps=max_steps, throw=False)
-        r = fn(sol.value, None)
+        r, solver_ok = evaluate(sol.value)
         cost = 0.5 * jnp.sum(r**2)
         # A point where the physics solver misses its tolerance has likelihood zero (see likelihood.py).
-        ok = (sol.result == optx.RESULTS.successful) & jnp.isfinite(cost) & solver_ok(sol.value)
+        ok = (sol.result == optx.RESULTS.successful) & jnp.isfinite(cost) & solver_ok
         return sol.value, ok, jnp.where(ok, cost, jnp.inf)
 
     starts = np.vstack([np.asarray(prior.median_unconstrained())[None], prior.sample(seed, n_starts - 1)])

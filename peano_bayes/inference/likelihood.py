@@ -198,7 +198,7 @@ def _reduce_run(run, k: int, denoise: bool) -> dict:
     return out
 
 
-def _share_repeats(test: str, members: list) -> tuple[np.ndarray, np.ndarray]:
+def _share_repeats(members: list) -> tuple[np.ndarray, np.ndarray]:
     """Which runs of a group can share one simulation: same specimen, time grid and load, and driving inputs
     equal to within one raw noise sd everywhere (repeats of one commanded protocol, denoised). Returns
     ``(simulated (u,), shared (r,))``: the first run of each set and, per run, the index of its set."""
@@ -252,7 +252,7 @@ def prepare(
     groups = []
     for (test, _), members in sorted(buckets.items()):
         if share_repeats and denoise_inputs:
-            simulated, shared = _share_repeats(test, members)
+            simulated, shared = _share_repeats(members)
         else:
             simulated, shared = np.arange(len(members)), np.arange(len(members))
 
@@ -341,6 +341,34 @@ def _log_density(residual, scale, family: str):
     )
 
 
+def bin_noise_sd(noise_sd, group: RunGroup):
+    """(r, m) sd of each bin mean of ``group``: ``noise_sd`` of one raw sample over sqrt(samples in the bin)."""
+    return noise_sd / jnp.sqrt(jnp.maximum(jnp.asarray(group.counts), 1.0))
+
+
+def group_log_likelihood(
+    params,
+    group: RunGroup,
+    *,
+    config: ModelConfig = DEFAULT_CONFIG,
+    geometry: Geometry = PAPER_GEOMETRY,
+    family: str = "gaussian",
+    solver_tolerance=SOLVER_TOLERANCE,
+):
+    """``(predicted, scale, ll)``, each (r, m), of one run group: the prediction, each bin's noise sd and its
+    log-likelihood (see :func:`pointwise_log_likelihood`)."""
+    if family not in ("gaussian", "student_t"):
+        raise ValueError(f"family must be 'gaussian' or 'student_t', got {family!r}")
+    model = {k: v for k, v in params.items() if k not in NOISE_PARAMETERS and k != "specimen_log_sd"}
+    predicted, solver_error = predict(model, group, config=config, geometry=geometry)
+    scale = bin_noise_sd(params[OBSERVED[group.test][1]], group)
+    observed = jnp.asarray(group.observed)
+    measured = jnp.isfinite(observed)
+    ll = jnp.where(measured, _log_density(jnp.where(measured, observed, 0.0) - predicted, scale, family), 0.0)
+    bad = ~jnp.all(jnp.isfinite(predicted), axis=1) | ~(solver_error <= solver_tolerance[group.test])
+    return predicted, scale, jnp.where(bad[:, None] | ~jnp.isfinite(ll), -jnp.inf, ll)
+
+
 def pointwise_log_likelihood(
     params,
     observations: Observations,
@@ -356,21 +384,8 @@ def pointwise_log_likelihood(
     ``"student_t"`` (4 degrees of freedom, for outliers). A run whose solver error exceeds its
     ``solver_tolerance`` (by test, see :data:`SOLVER_TOLERANCE`) gets -inf in every bin.
     """
-    if family not in ("gaussian", "student_t"):
-        raise ValueError(f"family must be 'gaussian' or 'student_t', got {family!r}")
-    model = {k: v for k, v in params.items() if k not in NOISE_PARAMETERS and k != "specimen_log_sd"}
-    out = []
-    for group in observations.groups:
-        predicted, solver_error = predict(model, group, config=config, geometry=observations.geometry)
-        _, noise_name = OBSERVED[group.test]
-        counts = jnp.asarray(group.counts)
-        scale = params[noise_name] / jnp.sqrt(jnp.maximum(counts, 1.0))
-        observed = jnp.asarray(group.observed)
-        measured = jnp.isfinite(observed)
-        ll = jnp.where(measured, _log_density(jnp.where(measured, observed, 0.0) - predicted, scale, family), 0.0)
-        bad = ~jnp.all(jnp.isfinite(predicted), axis=1) | ~(solver_error <= solver_tolerance[group.test])
-        out.append(jnp.where(bad[:, None] | ~jnp.isfinite(ll), -jnp.inf, ll))
-    return tuple(out)
+    kw = dict(config=config, geometry=observations.geometry, family=family, solver_tolerance=solver_tolerance)
+    return tuple(group_log_likelihood(params, group, **kw)[2] for group in observations.groups)
 
 
 def log_likelihood(params, observations: Observations, **kwargs):
@@ -391,6 +406,8 @@ __all__ = [
     "Observations",
     "RunGroup",
     "bin_means",
+    "bin_noise_sd",
+    "group_log_likelihood",
     "log_likelihood",
     "pointwise_log_likelihood",
     "predict",

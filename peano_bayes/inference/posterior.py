@@ -13,7 +13,7 @@ test) are held at their nominal values instead of being sampled from their prior
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import cached_property
 
 import jax
@@ -58,7 +58,7 @@ class Posterior:
     """Log posterior of one dataset. Build with :func:`build_posterior`.
 
     **Fields:** ``prior`` over the sampled parameters; ``observations``; ``config``; ``fixed`` values of the
-    model parameters not sampled [SI]; ``family`` of the likelihood; ``names`` (D,) of theta's entries.
+    model parameters not sampled [SI]; ``family`` of the likelihood.
     """
 
     prior: Prior
@@ -66,11 +66,16 @@ class Posterior:
     config: ModelConfig
     fixed: dict
     family: str = "gaussian"
-    names: tuple[str, ...] = field(init=False)
 
-    def __post_init__(self):
-        contrasts = tuple(f"{CONTRAST_PREFIX}{j + 1}" for j in range(self.n_contrasts))
-        object.__setattr__(self, "names", self.prior.names + contrasts)
+    @property
+    def names(self) -> tuple[str, ...]:
+        """(D,) theta's entries: the prior's parameters, then the specimen contrasts."""
+        return self.prior.names + tuple(f"{CONTRAST_PREFIX}{j + 1}" for j in range(self.n_contrasts))
+
+    @property
+    def units(self) -> dict[str, str]:
+        """name -> SI unit of every entry of theta (contrasts are log factors, "-")."""
+        return {**dict(self.prior.units), **{n: "-" for n in self.names[self.prior.ndim :]}}
 
     @property
     def ndim(self) -> int:

@@ -22,7 +22,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .likelihood import OBSERVED, predict
+from .likelihood import group_log_likelihood
 from .posterior import Posterior
 from .sample import SampleResult
 
@@ -52,19 +52,18 @@ def physical_draws(posterior: Posterior, thetas: np.ndarray) -> dict[str, np.nda
 
 
 def _predictions(posterior: Posterior, thetas: np.ndarray, rng: np.random.Generator):
-    """Pointwise log-likelihood and predictive draws (n, n_bins) at thetas (n, D)."""
+    """Pointwise log-likelihood and predictive draws (n, n_bins) at thetas (n, D), measured bins only (the
+    order of :meth:`Posterior.pointwise`); one simulation per draw serves both."""
     obs = posterior.observations
+    kw = dict(config=posterior.config, geometry=obs.geometry, family=posterior.family)
 
     def one(theta):
         params = posterior.params(theta)
-        preds, scales = [], []
+        parts = []
         for group in obs.groups:
-            predicted, _ = predict(params, group, config=posterior.config, geometry=obs.geometry)
-            scale = params[OBSERVED[group.test][1]] / np.sqrt(np.maximum(group.counts, 1.0))
             ok = np.isfinite(group.observed)
-            preds.append(predicted[ok])
-            scales.append(scale[ok])
-        return jnp.concatenate(preds), jnp.concatenate(scales), posterior.pointwise(theta)
+            parts.append([a[ok] for a in group_log_likelihood(params, group, **kw)])
+        return tuple(jnp.concatenate(column) for column in zip(*parts, strict=True))
 
     f = jax.jit(jax.vmap(one))
     outs = [f(thetas[i : i + 64]) for i in range(0, thetas.shape[0], 64)]

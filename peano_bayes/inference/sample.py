@@ -164,6 +164,14 @@ def load_state(path: str | os.PathLike):
         return z["chain"], z["log_prob"], rng, meta
 
 
+def walker_count(n_walkers: int | None, ndim: int) -> int:
+    """``n_walkers``, or by default ``max(32, 2 ndim + 2)``, rounded up to even (emcee's red-blue halves).
+    With 50 autocorrelation times required, 32 walkers already give an ESS near 1600; more walkers only cost
+    more per step."""
+    n = n_walkers or max(32, 2 * ndim + 2)
+    return n + n % 2
+
+
 def sample(
     posterior: Posterior,
     centre: np.ndarray,
@@ -179,17 +187,17 @@ def sample(
     log=print,
 ) -> SampleResult:
     """Run emcee on ``posterior`` from N(``centre``, ``covariance``) in theta space until converged (see the
-    module docstring) or ``max_steps``. ``n_walkers`` defaults to ``max(32, 2 D + 2)`` rounded up to even.
+    module docstring) or ``max_steps``. ``n_walkers``: see :func:`walker_count`.
     ``log(message)`` reports each chunk."""
     start_time = time.perf_counter()
     ndim = posterior.ndim
-    n_walkers = n_walkers or max(32, 2 * ndim + 2)
-    n_walkers += n_walkers % 2
+    n_walkers = walker_count(n_walkers, ndim)
     state_path = Path(state_path) if state_path is not None else None
     meta = {"names": list(posterior.names), "n_walkers": n_walkers, "seed": seed}
-    chain_parts, lp_parts, resumed_from = [], [], 0
-    log_prob_fn = posterior.batched
-    sampler = emcee.EnsembleSampler(n_walkers, ndim, log_prob_fn, vectorize=True, moves=[(m(), w) for m, w in MOVES])
+    chain, lps = np.zeros((0, n_walkers, ndim)), np.zeros((0, n_walkers))
+    sampler = emcee.EnsembleSampler(
+        n_walkers, ndim, posterior.batched, vectorize=True, moves=[(m(), w) for m, w in MOVES]
+    )
     if resume and state_path is not None and state_path.exists():
         chain, lps, rng_state, saved = load_state(state_path)
         if saved["names"] != meta["names"] or saved["n_walkers"] != n_walkers or saved["seed"] != seed:
@@ -197,46 +205,37 @@ def sample(
                 f"{state_path}: saved state is of another run (names, walkers or seed differ); "
                 "delete it or run without --resume"
             )
-        chain_parts, lp_parts, resumed_from = [chain], [lps], chain.shape[0]
         sampler.random_state = rng_state
         state = emcee.State(chain[-1], log_prob=lps[-1], random_state=rng_state)
-        log(f"resumed from {state_path} at step {resumed_from}")
+        log(f"resumed from {state_path} at step {chain.shape[0]}")
     else:
         walkers, lp0 = initial_walkers(posterior, centre, covariance, n_walkers, seed)
         sampler.random_state = np.random.RandomState(seed).get_state()
         state = emcee.State(walkers, log_prob=lp0, random_state=sampler.random_state)
-    steps = resumed_from
+    resumed_from = chain.shape[0]
     accepted = 0.0
     chunks = []
     result = None
-    while True:
-        done = steps
-        if done >= max_steps and chain_parts:
-            break
+    while chain.shape[0] < max_steps:
+        done = chain.shape[0]
         n = min(chunk, max_steps - done)
         t0 = time.perf_counter()
         sampler.reset()
         state = sampler.run_mcmc(state, n, progress=progress, progress_kwargs={"desc": f"steps {done}-{done + n}"})
-        chain_parts.append(sampler.get_chain())
-        lp_parts.append(sampler.get_log_prob())
+        chain = np.concatenate([chain, sampler.get_chain()])
+        lps = np.concatenate([lps, sampler.get_log_prob()])
         accepted = float(np.mean(sampler.acceptance_fraction))
-        steps += n
-        chain = np.concatenate(chain_parts)
-        lps = np.concatenate(lp_parts)
-        chain_parts, lp_parts = [chain], [lps]
         if state_path is not None:
             _save_state(state_path, chain, lps, sampler.random_state, meta)
         result = convergence(chain, posterior.names)
-        chunks.append({"steps": steps, "seconds": time.perf_counter() - t0, "acceptance": accepted})
+        chunks.append({"steps": chain.shape[0], "seconds": time.perf_counter() - t0, "acceptance": accepted})
         log(
-            f"step {steps}: acceptance {accepted:.2f}, tau_max {np.max(result.tau):.0f}, "
+            f"step {chain.shape[0]}: acceptance {accepted:.2f}, tau_max {np.max(result.tau):.0f}, "
             f"{result.tau_lengths:.0f} tau long, max R-hat {np.max(result.rhat):.3f}, "
             f"min bulk ESS {np.min(result.ess_bulk):.0f}" + ("" if result.converged else " (not yet converged)")
         )
         if result.converged:
             break
-    chain = np.concatenate(chain_parts)
-    lps = np.concatenate(lp_parts)
     result = result if result is not None else convergence(chain, posterior.names)
     return SampleResult(
         posterior.names,
@@ -250,4 +249,14 @@ def sample(
     )
 
 
-__all__ = ["MOVES", "TARGETS", "Convergence", "SampleResult", "convergence", "initial_walkers", "load_state", "sample"]
+__all__ = [
+    "MOVES",
+    "TARGETS",
+    "Convergence",
+    "SampleResult",
+    "convergence",
+    "initial_walkers",
+    "load_state",
+    "sample",
+    "walker_count",
+]
