@@ -3,12 +3,12 @@
 For each material (Table 4) a few parameters are freed (log-parameters inside a physically sensible box,
 much narrower than ``PARAMETERS`` bounds) and fitted by least squares so that the Table 3 metrics measured
 from **noise-free virtual-rig signals** (``peano_bayes.rig.simulate_dataset``, one specimen, no spread, the
-rig's own protocol; metrics from ``table3.py``, i.e. ``peano_bayes.physics.metrics``) match
+rig's own protocol; metrics from ``peano_bayes.metrics``) match
 ``data/published_metrics.csv``. Residuals are log-ratios over the tolerance (10 % explicit, 20 % approximate,
 30 % ambiguous); orderings (``data/published_orderings.csv``) are soft hinge residuals on log-ratios with a
 5 % margin, active once the other material of a pair has been fitted (materials are fitted in ``FIT_ORDER``);
 a weak prior term keeps each freed parameter near its nominal value. The step response is not required to
-overshoot (a hinge on it cost the 30 kPa fits too much); ``table3.step_window`` times a response without
+overshoot (a hinge on it cost the 30 kPa fits too much); ``peano_bayes.metrics.step_window`` times a response without
 overshoot to 99 % of its rise.
 
 Stiffness at -1.5 % (0 kPa) is fitted on a dedicated noise-free 0 kPa stretch from 0 to -3 % strain, because the
@@ -28,21 +28,17 @@ import argparse
 import csv
 import json
 import math
-import sys
 import time
-from functools import partial
 from pathlib import Path
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 from scipy.optimize import least_squares
 
-sys.path.insert(0, str(Path(__file__).parent))
-from table3 import dataset_metrics, stiffness  # noqa: E402
-
-from peano_bayes.physics import DEFAULT_CONFIG, PARAMETERS, LoadCycle, ModelConfig, simulate_load_cycle  # noqa: E402
-from peano_bayes.rig import RigNoise, RigSimulationError, apply_quirks, simulate_dataset  # noqa: E402
+from peano_bayes import metrics as table3  # noqa: E402
+from peano_bayes.metrics import NOISELESS, STIFFNESS, zero_kpa_stiffness  # noqa: E402, F401
+from peano_bayes.physics import DEFAULT_CONFIG, PARAMETERS, ModelConfig  # noqa: E402
+from peano_bayes.rig import RigSimulationError  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 
@@ -52,8 +48,6 @@ FIT_ORDER = ("TP", "PR", "P", "TFC", "FC", "PC", "TPC", "PCS")
 #: Warm starts: a material's fit starts from an already fitted, similar material.
 WARM_START = {"P": "TP", "TFC": "TP", "PC": "FC", "TPC": "FC", "PCS": "FC"}
 HIGH_PRESSURE = ("TPC", "PC", "PCS", "FC")
-NOISELESS = RigNoise(0.0, 0.0, 0.0, 0.0, 0.0)
-STIFFNESS = "stiffness_at_minus_1.5pct_0kPa"
 
 #: Freed parameters and their sensible box [SI units]; the box is where the fit may go, not a prior.
 FREE = {
@@ -75,7 +69,7 @@ FREE_EXTRA = {code: {"damping_up_ns_per_m": (1.0, 3e3)} for code in ("PR", "PC",
 EXTRA_QUIRKS = {code: ("nonlinear_damping",) for code in ("PR", "PC", "PCS")}
 #: Relative tolerance by kind of published number.
 TOLERANCE = {"explicit": 0.10, "approximate": 0.20, "ambiguous": 0.30}
-#: Metric names of published_metrics.csv -> names of table3.METRIC_UNITS (identical except stiffness).
+#: Metric names of published_metrics.csv -> names of peano_bayes.metrics.METRIC_UNITS (identical except stiffness).
 ORDER_MARGIN = 0.05
 EQUAL_BAND = 0.10
 PRIOR_WEIGHT = 0.05
@@ -148,31 +142,11 @@ def free_box(code: str) -> dict[str, tuple[float, float]]:
     return {**FREE, **(FREE_HIGH_PRESSURE if code in HIGH_PRESSURE else {}), **FREE_EXTRA.get(code, {})}
 
 
-@partial(jax.jit, static_argnames="config")
-def _zero_kpa_stretch(params, *, config):
-    time_s = jnp.arange(801) / 20.0
-    strain = jnp.interp(time_s, jnp.array([0.0, 20.0, 40.0]), jnp.array([0.0, -0.03, 0.0]))
-    result = simulate_load_cycle(params, LoadCycle(time_s, strain, jnp.zeros_like(time_s)), config=config)
-    return strain, result.force_n
-
-
-def zero_kpa_stiffness(params: dict, config: ModelConfig) -> float:
-    """Tangent stiffness at -1.5 % strain and 0 kPa [N/m] of a noise-free stretch from 0 to -3 % strain."""
-    full = {**config.nominal_parameters(), **params}
-    strain, force = _zero_kpa_stretch({k: jnp.asarray(v, jnp.float64) for k, v in full.items()}, config=config)
-    return stiffness(np.asarray(strain), np.asarray(force), 0.06)
-
-
 def model_metrics(code: str, params: dict) -> dict[str, float]:
-    """Table 3 metrics of noise-free rig signals of one specimen of ``code`` with ``params`` [SI units];
-    the stiffness from :func:`zero_kpa_stiffness`."""
+    """Table 3 metrics of noise-free rig signals of one specimen of ``code`` with ``params`` [SI units]
+    (:func:`peano_bayes.metrics.model_metrics` under the material's configuration and quirks)."""
     config, quirks = config_for(code)
-    dataset = simulate_dataset(
-        code, params, config=config, quirks=quirks, noise=NOISELESS, specimen_spread=0.0, repeats=1, specimens=1
-    )
-    values = dataset_metrics(dataset)
-    values[STIFFNESS] = zero_kpa_stiffness(params, apply_quirks(config, quirks))
-    return values
+    return table3.model_metrics(code, params, config=config, quirks=quirks)
 
 
 def residuals(code: str, params: dict, fitted: dict[str, dict], targets) -> np.ndarray:

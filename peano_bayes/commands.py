@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 from .cli import command
 
 
@@ -273,3 +275,64 @@ def _run_arguments(p):
 
 
 run.arguments = _run_arguments
+
+
+@command("metrics", "posterior of the paper's Table 3 metrics for one result, beside the published values")
+def metrics_command(args):
+    from .errors import PeanoBayesInputError
+    from .metrics import evaluate_result, metrics_markdown
+
+    if args.draws < 2:
+        raise PeanoBayesInputError(f"--draws must be >= 2, got {args.draws}")
+    out = evaluate_result(args.result, n_draws=args.draws, seed=args.seed, progress=not args.no_progress)
+    print(f"{out['material']}: {out['n_draws']} posterior draws ({out['n_failed']} failed to simulate)")
+    print(metrics_markdown(out["material"], out["summary"], out["published"]))
+    if out["prior_only"]:
+        print(f"not informed by the fitted tests, drawn from the prior: {', '.join(out['prior_only'])}")
+    return {k: v for k, v in out.items() if k != "draws"}
+
+
+def _metrics_arguments(p):
+    p.add_argument("result", metavar="RESULT", help="a result directory of 'peano-bayes fit' (or its posterior.nc)")
+    p.add_argument("--draws", type=int, default=100, help="posterior draws simulated (default: 100)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the prior draws of unfitted parameters (default: 0)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+metrics_command.arguments = _metrics_arguments
+
+
+@command("rank", "design ranking with uncertainty across results (needs each result's metrics.json)")
+def rank_command(args):
+    from pathlib import Path
+
+    from .inference.results import write_atomic_text
+    from .metrics import read_metrics
+    from .ranking import rank_materials, ranking_markdown
+
+    metrics = [read_metrics(path) for path in args.results]  # validate every input before writing
+    codes = [m["material"] for m in metrics]
+    twice = sorted({c for c in codes if codes.count(c) > 1})
+    if twice:
+        from .errors import PeanoBayesInputError
+
+        raise PeanoBayesInputError(f"material(s) given more than once: {', '.join(twice)}")
+    report = rank_materials({m["material"]: m["draws"] for m in metrics})
+    out = Path(args.out) if args.out else Path(args.results[0]).resolve().parent
+    out.mkdir(parents=True, exist_ok=True)
+    text = ranking_markdown(report)
+    write_atomic_text(out / "ranking.json", json.dumps(report, indent=1))
+    write_atomic_text(out / "ranking.md", "# Ranking\n\n" + text + "\n")
+    print(text)
+    print(f"wrote {out / 'ranking.json'} and {out / 'ranking.md'}")
+    return report
+
+
+def _rank_arguments(p):
+    p.add_argument("results", nargs="+", metavar="RESULT", help="result directories (each with metrics.json)")
+    p.add_argument(
+        "--out", default=None, metavar="DIR", help="where ranking.json/.md go (default: the results' parent)"
+    )
+
+
+rank_command.arguments = _rank_arguments

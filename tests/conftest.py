@@ -18,3 +18,33 @@ warnings.filterwarnings("ignore", category=FutureWarning, module="arviz")
 @pytest.fixture
 def rng():
     return np.random.default_rng(20161105)
+
+
+@pytest.fixture(scope="session")
+def recovered():
+    """One fit + sample on virtual-rig TP load cycles with known truth (the slow part of the suite; shared by
+    the recovery and the metrics tests): ``(posterior, result, draws, truth, fitted)``."""
+    from peano_bayes.inference import build_posterior, prepare, prior_for, sample
+    from peano_bayes.inference.results import physical_draws
+    from peano_bayes.physics import DEFAULT_CONFIG
+    from peano_bayes.pipeline import least_squares, walker_start
+    from peano_bayes.rig import RigNoise, simulate_dataset
+
+    from .helpers import RECOVERY_FREE, recovery_truth
+
+    truth = recovery_truth()
+    data = simulate_dataset(
+        "TP", truth, seed=31, specimens=1, repeats=1, specimen_spread=0.0, tests=("load_cycle",), noise=RigNoise()
+    )
+    prior = prior_for("TP")
+    fixed = {k: v for k, v in truth.items() if k not in RECOVERY_FREE}
+    posterior = build_posterior(prepare(data), prior, config=DEFAULT_CONFIG, fixed=fixed)
+    assert set(posterior.names) == {*RECOVERY_FREE, "noise_load_cycle_force_n"}
+    fitted = least_squares(posterior, prior, n_starts=8, seed=0)
+    centre, covariance = walker_start(posterior, fitted)
+    result = sample(
+        posterior, centre, covariance, n_walkers=16, seed=2, chunk=500, max_steps=6000, progress=False,
+        log=lambda m: None,
+    )
+    truth = {**truth, "noise_load_cycle_force_n": RigNoise().force_sd_n}
+    return posterior, result, physical_draws(posterior, result.kept()), truth, fitted

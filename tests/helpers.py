@@ -16,3 +16,13 @@ def central_difference(fn, params: dict, name: str, rel_step: float = 1e-6, abs_
         return float(fn(dict(params, **{name: x + dx})))
 
     return (8.0 * (at(h) - at(-h)) - (at(2.0 * h) - at(-2.0 * h))) / (12.0 * h)
+
+
+# The recovery case (tests/conftest.py ``recovered``): TP load cycles from known parameters, three of them free.
+RECOVERY_FREE = ("tensile_ka_n_per_m", "bending_k1_n", "friction_pressure_fraction")
+
+
+def recovery_truth() -> dict:
+    from peano_bayes.physics import DEFAULT_CONFIG
+
+    return dict(DEFAULT_CONFIG.nominal_parameters(), tensile_ka_n_per_m=8e3, bending_k1_n=1.0)

@@ -1,45 +1,10 @@
 """Parameter recovery on virtual-rig data with known truth: the multi-start least squares (optimistix LM),
-then emcee from its Laplace approximation. One dataset and one fit serve every check (they are the slow
-part of the suite)."""
+then emcee from its Laplace approximation. One dataset and one fit (the ``recovered`` fixture of conftest.py) serve
+every check; they are the slow part of the suite."""
 
 import arviz as az
 import numpy as np
 import pytest
-
-from peano_bayes.inference import build_posterior, prepare, prior_for, sample
-from peano_bayes.inference.results import physical_draws
-from peano_bayes.physics import DEFAULT_CONFIG
-from peano_bayes.pipeline import least_squares, walker_start
-from peano_bayes.rig import RigNoise, simulate_dataset
-
-FREE = ("tensile_ka_n_per_m", "bending_k1_n", "friction_pressure_fraction")
-TRUTH = dict(DEFAULT_CONFIG.nominal_parameters(), tensile_ka_n_per_m=8e3, bending_k1_n=1.0)
-
-
-@pytest.fixture(scope="module")
-def recovered():
-    data = simulate_dataset(
-        "TP", TRUTH, seed=31, specimens=1, repeats=1, specimen_spread=0.0, tests=("load_cycle",), noise=RigNoise()
-    )
-    prior = prior_for("TP")
-    fixed = {k: v for k, v in TRUTH.items() if k not in FREE}
-    posterior = build_posterior(prepare(data), prior, config=DEFAULT_CONFIG, fixed=fixed)
-    assert set(posterior.names) == {*FREE, "noise_load_cycle_force_n"}
-    fitted = least_squares(posterior, prior, n_starts=8, seed=0)
-    centre, covariance = walker_start(posterior, fitted)
-    result = sample(
-        posterior,
-        centre,
-        covariance,
-        n_walkers=16,
-        seed=2,
-        chunk=500,
-        max_steps=6000,
-        progress=False,
-        log=lambda m: None,
-    )
-    truth = {**TRUTH, "noise_load_cycle_force_n": RigNoise().force_sd_n}
-    return posterior, result, physical_draws(posterior, result.kept()), truth, fitted
 
 
 @pytest.mark.slow

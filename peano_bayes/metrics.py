@@ -1,0 +1,439 @@
+"""The paper's Table 3 metrics: measured from a rig dataset, and predicted by a posterior.
+
+**Measured** (:func:`dataset_metrics`, :func:`run_metrics`): every metric uses
+:mod:`peano_bayes.physics.metrics` (the paper's Table 3 definitions) on each run and is averaged over specimens
+and repeats. Interpretation choices, stated once:
+
+- stiffness: tangent of the stretching branch of the 0 kPa load cycles at -1.5 % strain [N/m], from a
+  quadratic fitted over +-0.3 % strain around it (a plain finite difference of noisy data is meaningless);
+  NaN when the cycle does not cover -1.5 % (the start tension already stretches the muscle past it);
+- hysteresis loss, free strain and energy: the load cycles at the test pressure (Figure 9 uses the
+  pressurized cycles of Figure 8(b)(d));
+- step metrics: the formulas of :func:`peano_bayes.physics.metrics.step_metrics` (rms speed, rms power
+  ``m (g + a) v``, rms mechanical over rms fluid power) on strain and flow smoothed with a zero-phase
+  Savitzky-Golay filter (``STEP_SMOOTHING_S``, as any rig must before taking a speed and an acceleration from
+  a 1 kHz position signal), over a window from the supply edge to the first maximum of the smoothed strain
+  after it has risen halfway to its final value (the first overshoot peak; sensor noise makes earlier local
+  maxima), or, for a response without overshoot (over 1 % of the rise), to 99 % of the rise. For an
+  overshooting response on noise-free signals this equals ``step_metrics`` to within a percent.
+
+**Predicted** (:func:`model_metrics`, :func:`posterior_metrics`): the same definitions on noise-free virtual-rig
+signals of one specimen (:func:`peano_bayes.rig.simulate_dataset`, the paper's protocol for the material), one
+simulation per parameter draw; the stiffness from a dedicated 0 kPa stretch from 0 to -3 % strain
+(:func:`zero_kpa_stiffness`), because the rig's 0 kPa cycle starts at the start tension, which stretches soft
+muscles past -1.5 %.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import partial
+from pathlib import Path
+
+import arviz as az
+import jax
+import jax.numpy as jnp
+import numpy as np
+from scipy.signal import savgol_filter
+
+from .errors import PeanoBayesInputError
+from .inference.posterior import STEP_ONLY_PARAMETERS
+from .inference.priors import prior_for
+from .physics import DEFAULT_CONFIG, PAPER_GEOMETRY, Geometry, LoadCycle, ModelConfig, simulate_load_cycle
+from .physics import metrics as m
+from .physics.model import GRAVITY_M_PER_S2
+from .rig import RigNoise, RigSimulationError, apply_quirks, simulate_dataset
+
+#: Savitzky-Golay window of the step-response smoothing [s] (order 3); 15 ms at 1 kHz is 15 samples.
+STEP_SMOOTHING_S = 0.015
+
+#: Metric name -> SI unit, in report order.
+METRIC_UNITS = {
+    "stiffness_at_minus_1.5pct_0kPa": "N/m",
+    "hysteresis_loss": "fraction",
+    "free_strain": "fraction",
+    "energy_per_pressure": "J/MPa",
+    "blocking_force_per_pressure": "N/MPa",
+    "stroke": "fraction",
+    "speed": "m/s",
+    "power_per_pressure": "W/MPa",
+    "efficiency": "fraction",
+    "overshoot": "fraction",
+}
+
+
+#: Half-width of the strain window of the stiffness fit [-].
+STIFFNESS_HALF_WINDOW = 0.003
+STIFFNESS_STRAIN = -0.015
+
+
+def _smooth(signal, time_s):
+    """Zero-phase Savitzky-Golay smoothing (order 3) over ``STEP_SMOOTHING_S``."""
+    dt = float(np.median(np.diff(time_s)))
+    window = int(round(STEP_SMOOTHING_S / dt)) | 1
+    if window < 5 or len(signal) <= window:
+        return np.asarray(signal, float)
+    return savgol_filter(np.asarray(signal, float), window, 3)
+
+
+def stiffness(strain, force_n, flat_length_m, at_strain: float = STIFFNESS_STRAIN) -> float:
+    """Tangent stiffness -dF/dy of the stretching branch at ``at_strain`` [N/m] from a quadratic fitted to the
+    branch within ``STIFFNESS_HALF_WINDOW`` of it (one-sided where the branch turns there); NaN if the branch
+    does not reach ``at_strain`` or starts less than ``STIFFNESS_HALF_WINDOW`` above it."""
+    strain, force_n = np.asarray(strain, float), np.asarray(force_n, float)
+    turn = int(np.argmin(strain))
+    s, f = strain[: turn + 1], force_n[: turn + 1]
+    if s.max() < at_strain + STIFFNESS_HALF_WINDOW or s.min() > at_strain + 1e-4:
+        return float("nan")
+    near = np.abs(s - at_strain) <= STIFFNESS_HALF_WINDOW
+    coef = np.polyfit(s[near] - at_strain, f[near], 2)
+    return float(-coef[1] / flat_length_m)
+
+
+#: A step response overshoots if its peak exceeds its final value by this fraction of the rise; without
+#: overshoot the window ends where the strain first reaches ``1 - OVERSHOOT_FRACTION`` of the rise.
+OVERSHOOT_FRACTION = 0.01
+
+
+def step_window(strain) -> tuple[int, int]:
+    """``(half, stop)`` sample indices of a (smoothed) step response: ``half`` where the strain first reaches
+    half its rise; ``stop`` the first maximum after it (the first overshoot peak, Table 3), or, for a response
+    that does not overshoot, the first sample at 99 % of the rise (the peak is then undefined: the slow tail
+    would otherwise set the rms speed, and noise would decide where it ends)."""
+    strain = np.asarray(strain, float)
+    n = max(len(strain) // 20, 3)
+    initial, final = np.median(strain[:n]), np.median(strain[-n:])
+    rise = final - initial
+    half = int(np.argmax(strain - initial >= 0.5 * rise))
+    if strain.max() - final < OVERSHOOT_FRACTION * rise:
+        return half, int(np.argmax(strain - initial >= (1 - OVERSHOOT_FRACTION) * rise))
+    step = np.diff(strain[half:])
+    turns = np.nonzero((step[:-1] > 0) & (step[1:] <= 0))[0]
+    stop = half + 1 + int(turns[0]) if len(turns) else len(strain) - 1
+    return half, stop
+
+
+def step_metrics(time_s, strain, supply_pa, flow_m3_per_s, load_n, flat_length_m, test_pressure_pa) -> dict:
+    """Speed [m/s], power per pressure [W/MPa], efficiency [-] and overshoot (peak over final strain, as a
+    fraction of the rise) of a step response, Table 3 definitions
+    (the formulas of ``peano_bayes.physics.metrics.step_metrics``) on smoothed signals over the window from the
+    supply edge (``metrics.step_window``) to the first overshoot peak (:func:`step_window`)."""
+    time_s = np.asarray(time_s, float)
+    strain = _smooth(strain, time_s)
+    flow = _smooth(flow_m3_per_s, time_s)
+    start, _ = m.step_window(time_s, strain, supply_pa)
+    _, stop = step_window(strain)
+    window = slice(start, max(stop, start + 2) + 1)
+    v = np.gradient(strain * flat_length_m, time_s)
+    a = np.gradient(v, time_s)
+    power = load_n * (1.0 + a / GRAVITY_M_PER_S2) * v
+    rms_power = float(np.sqrt(np.mean(power[window] ** 2)))
+    fluid = np.asarray(supply_pa, float) * flow
+    n = max(len(strain) // 20, 3)
+    initial, final = np.median(strain[:n]), np.median(strain[-n:])
+    return {
+        "overshoot": float((strain.max() - final) / (final - initial)),
+        "speed": float(np.sqrt(np.mean(v[window] ** 2))),
+        "power_per_pressure": rms_power / (test_pressure_pa / m.PA_PER_MPA),
+        "efficiency": rms_power / float(np.sqrt(np.mean(fluid[window] ** 2))),
+    }
+
+
+def run_metrics(dataset) -> dict[str, list[float]]:
+    """Every Table 3 metric of every run of ``dataset``: metric name -> list of per-run values (SI units)."""
+    l0 = dataset.geometry.flat_length_m
+    p_test = dataset.conditions.test_pressure_pa
+    out: dict[str, list[float]] = {name: [] for name in METRIC_UNITS}
+    for run in dataset.runs:
+        if run.test == "load_cycle":
+            if np.median(run.pressure_pa) < 0.5 * p_test:
+                out["stiffness_at_minus_1.5pct_0kPa"].append(stiffness(run.strain, run.force_n, l0))
+            else:
+                out["hysteresis_loss"].append(m.hysteresis_loss(run.strain, run.force_n))
+                out["free_strain"].append(m.free_strain(run.strain, run.force_n))
+                out["energy_per_pressure"].append(m.energy_per_pressure(run.strain, run.force_n, run.pressure_pa, l0))
+        elif run.test == "blocking":
+            out["blocking_force_per_pressure"].append(m.blocking_force_per_pressure(run.pressure_pa, run.force_n))
+        elif run.test == "stroke":
+            out["stroke"].append(m.stroke(run.strain))
+        elif run.test == "step":
+            load = float(np.nanmedian(run.load_n))
+            for name, value in step_metrics(
+                run.time_s, run.strain, run.supply_pa, run.flow_m3_per_s, load, l0, p_test
+            ).items():
+                out[name].append(value)
+    return out
+
+
+def dataset_metrics(dataset) -> dict[str, float]:
+    """Table 3 metrics of ``dataset``, each the mean over specimens and repeats (SI units, per MPa where the
+    paper normalizes); NaN for a metric no run measures or that a run cannot measure."""
+    return {name: float(np.mean(v)) if v else float("nan") for name, v in run_metrics(dataset).items()}
+
+
+# --- predicted: noise-free virtual-rig signals of one specimen -----------------------------------------------
+
+STIFFNESS = "stiffness_at_minus_1.5pct_0kPa"
+#: Metrics that need the step test (the rest come from load cycles, blocking and stroke).
+STEP_METRICS = ("speed", "power_per_pressure", "efficiency", "overshoot")
+NOISELESS = RigNoise(0.0, 0.0, 0.0, 0.0, 0.0)
+#: Where the bundled copies of the paper's extracted numbers live.
+PUBLISHED_DIR = Path(__file__).resolve().parents[1] / "experiments" / "data"
+
+
+@partial(jax.jit, static_argnames="config")
+def _zero_kpa_stretch(params, time_s, *, config):
+    strain = jnp.interp(time_s, jnp.array([0.0, 20.0, 40.0]), jnp.array([0.0, -0.03, 0.0]))
+    result = simulate_load_cycle(params, LoadCycle(time_s, strain, jnp.zeros_like(time_s)), config=config)
+    return strain, result.force_n
+
+
+def zero_kpa_stiffness(params: dict, config: ModelConfig = DEFAULT_CONFIG, geometry: Geometry = PAPER_GEOMETRY):
+    """Tangent stiffness at -1.5 % strain and 0 kPa [N/m] of a noise-free stretch from 0 to -3 % strain and back
+    over 40 s (20 Hz); ``params`` [SI] missing a name the ``config`` reads take its nominal value."""
+    full = {**config.nominal_parameters(), **params}
+    jparams = {k: jnp.asarray(v, jnp.float64) for k, v in full.items()}
+    strain, force = _zero_kpa_stretch(jparams, jnp.arange(801) / 20.0, config=config)
+    return stiffness(np.asarray(strain), np.asarray(force), geometry.flat_length_m)
+
+
+def model_metrics(material, params: dict, *, config: ModelConfig = DEFAULT_CONFIG, quirks=()) -> dict[str, float]:
+    """Table 3 metrics [SI, see :data:`METRIC_UNITS`] of noise-free rig signals of one specimen of ``material``
+    (a Table 4 code or :class:`~peano_bayes.materials.MaterialSpec`) with ``params`` [SI], under the paper's
+    protocol for that material; the stiffness from :func:`zero_kpa_stiffness`. Raises
+    :class:`~peano_bayes.rig.RigSimulationError` where the physics does not converge."""
+    dataset = simulate_dataset(
+        material, params, config=config, quirks=quirks, noise=NOISELESS, specimen_spread=0.0, repeats=1, specimens=1
+    )
+    values = dataset_metrics(dataset)
+    values[STIFFNESS] = zero_kpa_stiffness(params, apply_quirks(config, quirks), dataset.geometry)
+    return values
+
+
+@dataclass(frozen=True)
+class PosteriorMetrics:
+    """Posterior predictive Table 3 metrics of one material.
+
+    **Fields:** ``material`` code; ``draws`` metric -> (n,) values [SI, :data:`METRIC_UNITS`], NaN where a
+    draw's simulation failed or the metric is undefined; ``n_failed`` draws whose physics did not converge;
+    ``prior_only`` parameters the posterior does not hold (not informed by the fitted tests), drawn from the
+    prior; ``from_prior`` metrics that depend on them (e.g. the step metrics when the step test was not fitted).
+    """
+
+    material: str
+    draws: dict
+    n_failed: int
+    prior_only: tuple
+    from_prior: tuple
+
+    def summary(self, hdi_prob: float = 0.94) -> dict:
+        """metric -> ``median``, ``hdi_low``, ``hdi_high`` (arviz HDI), ``unit``, ``n`` (finite draws) and
+        ``from_prior``."""
+        out = {}
+        for name, values in self.draws.items():
+            finite = values[np.isfinite(values)]
+            if finite.size >= 2:
+                low, high = (float(x) for x in az.hdi(finite, hdi_prob=hdi_prob))
+                median = float(np.median(finite))
+            else:
+                low = high = median = float("nan")
+            out[name] = {
+                "median": median,
+                "hdi_low": low,
+                "hdi_high": high,
+                "unit": METRIC_UNITS[name],
+                "n": int(finite.size),
+                "from_prior": name in self.from_prior,
+            }
+        return out
+
+
+def result_config(idata) -> ModelConfig:
+    """The model configuration a result was sampled with (its ``model_config`` attribute)."""
+    return ModelConfig(**json.loads(idata.posterior.attrs["model_config"]))
+
+
+def parameter_draws(idata, n_draws: int, seed: int = 0) -> tuple[list[dict], tuple[str, ...]]:
+    """``n_draws`` parameter sets [SI] of the typical specimen (specimen offset 0) from a result, evenly spaced
+    over the stored posterior, and the names drawn from the prior instead (see :class:`PosteriorMetrics`).
+
+    Every name the result's configuration reads: posterior draw if sampled; else the ``fixed_parameters``
+    attribute or the nominal value (shape constants held in the fit); except step-only parameters
+    (:data:`~peano_bayes.inference.posterior.STEP_ONLY_PARAMETERS`) of a fit without the step test, which are
+    drawn from the material's prior file so the step metrics carry honest (prior) uncertainty."""
+    attrs = idata.posterior.attrs
+    config = result_config(idata)
+    material = attrs["material"]
+    post = idata.posterior.stack(sample=("chain", "draw"))
+    total = post.sizes["sample"]
+    if not 1 <= n_draws <= total:
+        raise PeanoBayesInputError(f"n_draws must be in [1, {total}] (the stored draws), got {n_draws}")
+    pick = np.linspace(0, total - 1, n_draws).round().astype(int)
+    fixed = {**config.nominal_parameters(), **json.loads(attrs.get("fixed_parameters", "{}"))}
+    names = config.parameter_names()
+    prior_only = tuple(n for n in names if n not in post and n in STEP_ONLY_PARAMETERS)
+    prior_values = {}
+    if prior_only:
+        prior = prior_for(material, config=config).select(prior_only)
+        prior_values = prior.sample_params(np.random.default_rng([seed, 7]), n_draws)
+    sets = []
+    for i, j in enumerate(pick):
+        params = {}
+        for n in names:
+            if n in post:
+                params[n] = float(post[n].values[j])
+            elif n in prior_values:
+                params[n] = float(np.asarray(prior_values[n])[i])
+            else:
+                params[n] = float(fixed[n])
+        sets.append(params)
+    return sets, prior_only
+
+
+def posterior_metrics(
+    idata, *, n_draws: int = 100, seed: int = 0, progress: Callable | None = None
+) -> PosteriorMetrics:
+    """Posterior predictive Table 3 metrics of a result (``posterior.nc`` as arviz InferenceData): the paper's
+    protocol simulated noise-free for ``n_draws`` posterior draws (:func:`parameter_draws`), each measured as
+    the rig would be (:func:`model_metrics`). ``progress`` wraps the draw iterator (e.g. ``tqdm``)."""
+    material = idata.posterior.attrs["material"]
+    config = result_config(idata)
+    sets, prior_only = parameter_draws(idata, n_draws, seed)
+    draws = {name: np.full(n_draws, np.nan) for name in METRIC_UNITS}
+    failed = 0
+    for i, params in enumerate(progress(sets) if progress else sets):
+        try:
+            values = model_metrics(material, params, config=config)
+        except RigSimulationError:
+            failed += 1
+            continue
+        for name, value in values.items():
+            draws[name][i] = value
+    from_prior = STEP_METRICS if any(n in STEP_ONLY_PARAMETERS for n in prior_only) else ()
+    return PosteriorMetrics(material, draws, failed, prior_only, from_prior)
+
+
+def published_metrics(material: str, path: str | Path | None = None) -> list[dict]:
+    """Rows of ``published_metrics.csv`` for ``material`` whose metric this module predicts: ``metric``,
+    ``value`` [SI, :data:`METRIC_UNITS`], ``kind`` (explicit / approximate / ambiguous) and ``source``."""
+    path = Path(path) if path else PUBLISHED_DIR / "published_metrics.csv"
+    with open(path, newline="") as f:
+        return [
+            {"metric": r["metric"], "value": float(r["value"]), "kind": r["kind"].split()[0], "source": r["source"]}
+            for r in csv.DictReader(f)
+            if r["material"] == material and r["metric"] in METRIC_UNITS
+        ]
+
+
+def compare_published(material: str, summary: dict, path: str | Path | None = None) -> list[dict]:
+    """Each published metric of ``material`` beside the posterior ``summary`` (:meth:`PosteriorMetrics.summary`):
+    the row of :func:`published_metrics` plus ``median``, ``hdi_low``, ``hdi_high`` and ``inside`` (does the
+    interval contain the published value; None when the prediction is undefined)."""
+    rows = []
+    for row in published_metrics(material, path):
+        if row["metric"] not in summary:
+            continue
+        got = summary[row["metric"]]
+        defined = math.isfinite(got["hdi_low"])
+        inside = bool(got["hdi_low"] <= row["value"] <= got["hdi_high"]) if defined else None
+        rows.append({**row, **{k: got[k] for k in ("median", "hdi_low", "hdi_high", "from_prior")}, "inside": inside})
+    return rows
+
+
+def load_result(path: str | Path):
+    """The arviz InferenceData of a result: ``path`` is a ``posterior.nc`` file or a directory holding one.
+    Raises :class:`~peano_bayes.errors.PeanoBayesInputError` naming the file and what is wrong."""
+    path = Path(path)
+    nc = path / "posterior.nc" if path.is_dir() else path
+    if not nc.is_file():
+        raise PeanoBayesInputError(
+            f"{nc}: no such file; expected a result directory of 'peano-bayes fit' or its posterior.nc"
+        )
+    try:
+        idata = az.from_netcdf(str(nc))
+    except (OSError, ValueError) as err:
+        raise PeanoBayesInputError(f"{nc}: not a readable NetCDF result ({err})") from None
+    if "posterior" not in idata.groups():
+        raise PeanoBayesInputError(f"{nc}: has no posterior group; expected the posterior.nc of 'peano-bayes fit'")
+    missing = [k for k in ("material", "model_config") if k not in idata.posterior.attrs]
+    if missing:
+        raise PeanoBayesInputError(
+            f"{nc}: the posterior group lacks the attribute(s) {', '.join(missing)}; it was written by an older "
+            "peano_bayes or another tool; rerun 'peano-bayes fit'"
+        )
+    return idata
+
+
+def _fmt(x: float) -> str:
+    return f"{x:.3g}" if math.isfinite(x) else "n/a"
+
+
+def metrics_markdown(material: str, summary: dict, comparison: list[dict]) -> str:
+    """A markdown table of a material's posterior metrics with the published values beside them."""
+    published = {row["metric"]: row for row in comparison}
+    lines = [
+        "| metric | unit | median | 94 % interval | published | inside |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name, s in summary.items():
+        row = published.get(name)
+        pub = f"{row['value']:.3g} ({row['kind']})" if row else "-"
+        inside = "-" if not row or row["inside"] is None else ("yes" if row["inside"] else "**no**")
+        flag = " (prior: step not fitted)" if s["from_prior"] else ""
+        lines.append(
+            f"| {name}{flag} | {s['unit']} | {_fmt(s['median'])} | {_fmt(s['hdi_low'])} to {_fmt(s['hdi_high'])} "
+            f"| {pub} | {inside} |"
+        )
+    return "\n".join(lines)
+
+
+def evaluate_result(
+    path: str | Path, *, n_draws: int = 100, seed: int = 0, hdi_prob: float = 0.94, progress: bool = True
+) -> dict:
+    """Posterior metrics of one result (``posterior.nc`` or its directory), compared with the paper, written to
+    ``metrics.json`` beside the result (atomically); returns what it wrote: ``material``, ``n_draws``,
+    ``n_failed``, ``prior_only``, ``summary`` (:meth:`PosteriorMetrics.summary`), ``published``
+    (:func:`compare_published`) and ``draws`` (metric -> list of values, for :mod:`peano_bayes.ranking`)."""
+    from tqdm.auto import tqdm
+
+    from .inference.results import write_atomic_text
+
+    idata = load_result(path)
+    total = idata.posterior.sizes["chain"] * idata.posterior.sizes["draw"]
+    n_draws = min(n_draws, total)
+    material = idata.posterior.attrs["material"]
+    bar = (lambda it: tqdm(it, desc=f"{material} metrics", unit="draw")) if progress else None
+    result = posterior_metrics(idata, n_draws=n_draws, seed=seed, progress=bar)
+    summary = result.summary(hdi_prob)
+    out = {
+        "material": material,
+        "n_draws": n_draws,
+        "n_failed": result.n_failed,
+        "prior_only": list(result.prior_only),
+        "hdi_prob": hdi_prob,
+        "summary": summary,
+        "published": compare_published(material, summary),
+        "draws": {name: [float(x) for x in values] for name, values in result.draws.items()},
+    }
+    directory = Path(path) if Path(path).is_dir() else Path(path).parent
+    write_atomic_text(directory / "metrics.json", json.dumps(out, indent=1, default=float))
+    return out
+
+
+def read_metrics(path: str | Path) -> dict:
+    """The ``metrics.json`` of a result directory (see :func:`evaluate_result`)."""
+    path = Path(path)
+    file = path / "metrics.json" if path.is_dir() else path
+    try:
+        out = json.loads(file.read_text())
+    except FileNotFoundError:
+        raise PeanoBayesInputError(f"{file}: no such file; run 'peano-bayes metrics {path}' first") from None
+    except json.JSONDecodeError as err:
+        raise PeanoBayesInputError(f"{file}: not valid JSON ({err})") from None
+    if not isinstance(out, dict) or "draws" not in out or "material" not in out:
+        raise PeanoBayesInputError(f"{file}: lacks 'material' or 'draws'; rerun 'peano-bayes metrics {path}'")
+    return out

@@ -1,0 +1,209 @@
+"""Design ranking with uncertainty: which material is best by each Table 3 criterion, and how sure we are.
+
+Works on posterior predictive metric draws (:mod:`peano_bayes.metrics`), one independent posterior per
+material, so draws of different materials are paired by index (any pairing of independent draws is a draw
+from the joint). Per criterion: the probability each material is best, the pairwise matrix P(row better than
+column), the expected rank with a 94 % interval; over :data:`PARETO_CRITERIA` jointly, the probability each
+material is Pareto-optimal; and the paper's stated orderings (:data:`PUBLISHED_ORDERINGS`) as probabilities.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+#: Criterion -> +1 where larger is better, -1 where smaller is better (SI names of ``metrics.METRIC_UNITS``).
+CRITERIA = {
+    "blocking_force_per_pressure": +1,
+    "free_strain": +1,
+    "stroke": +1,
+    "energy_per_pressure": +1,
+    "hysteresis_loss": -1,
+    "speed": +1,
+    "power_per_pressure": +1,
+    "efficiency": +1,
+}
+#: The joint criteria of the Pareto set (force, stroke, energy, hysteresis, speed).
+PARETO_CRITERIA = ("blocking_force_per_pressure", "stroke", "energy_per_pressure", "hysteresis_loss", "speed")
+#: "About equal" in the paper's orderings: |log ratio| within this band.
+EQUAL_BAND = 0.10
+STIFFNESS = "stiffness_at_minus_1.5pct_0kPa"
+
+#: The paper's orderings (``published_orderings.csv``, by row) as checks (metric, a, relation, b), relation
+#: ``">"`` (a larger) or ``"="`` (about equal, :data:`EQUAL_BAND`).
+PUBLISHED_ORDERINGS = [
+    [("speed", "TP", ">", "P"), ("speed", "P", ">", "TFC"), ("speed", "TFC", ">", "PR")],
+    [("speed", "FC", ">", "PCS"), ("speed", "PCS", ">", "TPC"), ("speed", "TPC", ">", "PC")],
+    [("efficiency", "TP", ">", "P"), ("efficiency", "P", ">", "TFC"), ("efficiency", "TFC", ">", "PR")],
+    [("efficiency", "FC", ">", "TPC"), ("efficiency", "PC", "=", "PCS")],
+    [("power_per_pressure", "FC", ">", b) for b in ("TP", "P", "PR", "TPC", "PC", "PCS", "TFC")]
+    + [("power_per_pressure", a, ">", "PR") for a in ("TP", "P", "TPC", "PC", "PCS", "TFC")]
+    + [("power_per_pressure", "PCS", "=", "PC")],
+    [(STIFFNESS, "PR", ">", "P"), (STIFFNESS, "P", ">", "TP")],
+    [(STIFFNESS, "FC", ">", b) for b in ("TPC", "PC", "PCS", "TFC")]
+    + [(STIFFNESS, "TPC", ">", "PC"), (STIFFNESS, "PC", ">", "PCS")]
+    + [(STIFFNESS, "TPC", ">", "TFC"), (STIFFNESS, "PC", ">", "TFC")],
+    [("free_strain", "TP", ">", "TFC"), ("free_strain", "P", ">", "TFC"), ("free_strain", "TFC", ">", "PR")],
+    [("free_strain", a, ">", b) for a in ("TPC", "FC") for b in ("PC", "PCS")],
+    [("blocking_force_per_pressure", a, ">", b) for a, b in (("PR", "P"), ("P", "TP"))]
+    + [("blocking_force_per_pressure", a, ">", b) for a, b in (("FC", "TPC"), ("TPC", "PC"), ("PC", "PCS"))],
+    [("blocking_force_per_pressure", "TP", ">", "FC"), ("blocking_force_per_pressure", "TFC", ">", "FC")],
+    [("hysteresis_loss", "PR", ">", "TP"), ("hysteresis_loss", "PR", ">", "P"), ("hysteresis_loss", "TP", "=", "P")],
+    [("hysteresis_loss", "PC", ">", "TPC"), ("hysteresis_loss", "TFC", "=", "FC")],
+    [("energy_per_pressure", "TP", "=", "P"), ("energy_per_pressure", "P", ">", "TFC")]
+    + [("energy_per_pressure", "TFC", ">", "PR")],
+    [("energy_per_pressure", "PCS", ">", b) for b in ("TPC", "PC", "FC")]
+    + [("energy_per_pressure", "TPC", "=", "PC"), ("energy_per_pressure", "PC", "=", "FC")],
+]
+
+
+@dataclass(frozen=True)
+class CriterionRanking:
+    """One criterion over ``materials`` (m,): ``p_best`` (m,); ``p_better`` (m, m), P(row better than column);
+    ``mean_rank`` (m,) with ``rank_low``/``rank_high`` (94 % interval; 1 = best); ``n`` joint draws used."""
+
+    criterion: str
+    materials: tuple
+    p_best: np.ndarray
+    p_better: np.ndarray
+    mean_rank: np.ndarray
+    rank_low: np.ndarray
+    rank_high: np.ndarray
+    n: int
+
+
+def _joint(draws: dict, materials, names) -> np.ndarray:
+    """(n, m, k) joint draws of criteria ``names``, oriented so larger is better, over draws finite everywhere."""
+    n = min(len(draws[code][names[0]]) for code in materials)
+    per_material = [
+        np.stack([CRITERIA.get(c, 1) * np.asarray(draws[code][c][:n], float) for c in names], -1) for code in materials
+    ]
+    stack = np.stack(per_material, axis=1)
+    return stack[np.all(np.isfinite(stack), axis=(1, 2))]
+
+
+def rank_criterion(draws: dict, criterion: str, materials=None) -> CriterionRanking:
+    """Rank ``materials`` (default: all keys of ``draws``) by ``criterion``; ``draws`` maps code -> metric ->
+    (n,) posterior predictive draws. Ties (equal draws) count as not better."""
+    materials = tuple(materials or draws)
+    values = _joint(draws, materials, (criterion,))[..., 0]  # (n, m)
+    if values.shape[0] == 0:
+        raise ValueError(f"no draw has a finite {criterion} for every material")
+    order = np.argsort(np.argsort(-values, axis=1, kind="stable"), axis=1) + 1  # rank per draw, 1 = best
+    p_better = np.mean(values[:, :, None] > values[:, None, :], axis=0)
+    return CriterionRanking(
+        criterion,
+        materials,
+        np.mean(order == 1, axis=0),
+        p_better,
+        order.mean(axis=0),
+        np.quantile(order, 0.03, axis=0, method="inverted_cdf"),
+        np.quantile(order, 0.97, axis=0, method="inverted_cdf"),
+        values.shape[0],
+    )
+
+
+def pareto_probability(draws: dict, materials=None, criteria=PARETO_CRITERIA) -> dict[str, float]:
+    """code -> probability of being Pareto-optimal (no other material at least as good on every criterion and
+    better on one) over ``criteria`` jointly."""
+    materials = tuple(materials or draws)
+    x = _joint(draws, materials, tuple(criteria))  # (n, m, k), larger is better
+    geq = np.all(x[:, :, None, :] >= x[:, None, :, :], axis=-1)  # [d, i, j]: i >= j everywhere
+    gt = np.any(x[:, :, None, :] > x[:, None, :, :], axis=-1)
+    dominated = np.any(geq & gt, axis=1)  # some i dominates j
+    return {code: float(np.mean(~dominated[:, j])) for j, code in enumerate(materials)}
+
+
+def ordering_checks(draws: dict) -> list[dict]:
+    """The paper's orderings checked on the posterior: per row of ``published_orderings.csv``, each relation
+    whose two materials are in ``draws`` with its probability (P(a > b), or P(|log a/b| <= EQUAL_BAND))."""
+    out = []
+    for row, checks in enumerate(PUBLISHED_ORDERINGS):
+        for metric, a, relation, b in checks:
+            if a not in draws or b not in draws or metric not in draws[a] or metric not in draws[b]:
+                continue
+            va = np.asarray(draws[a][metric], float)
+            vb = np.asarray(draws[b][metric], float)
+            n = min(va.size, vb.size)
+            va, vb = va[:n], vb[:n]
+            ok = np.isfinite(va) & np.isfinite(vb) & (va > 0) & (vb > 0)
+            if not ok.any():
+                p = math.nan
+            elif relation == ">":
+                p = float(np.mean(va[ok] > vb[ok]))
+            else:
+                p = float(np.mean(np.abs(np.log(va[ok] / vb[ok])) <= EQUAL_BAND))
+            out.append({"row": row, "metric": metric, "a": a, "relation": relation, "b": b, "probability": p})
+    return out
+
+
+def rank_materials(draws: dict) -> dict:
+    """Everything :mod:`peano_bayes.ranking` computes, as plain data: ``materials``; ``criteria`` (per
+    criterion: ``p_best``, ``mean_rank``, ``rank_interval`` by material, ``p_better`` matrix rows by material,
+    ``n`` draws; criteria no draw defines are left out); ``pareto`` (P(Pareto-optimal) by material);
+    ``orderings`` (:func:`ordering_checks`). ``draws``: code -> metric -> (n,) values."""
+    materials = tuple(draws)
+    criteria = {}
+    for criterion in CRITERIA:
+        try:
+            r = rank_criterion(draws, criterion, materials)
+        except ValueError:
+            continue
+        by = lambda values: dict(zip(materials, values, strict=True))  # noqa: E731
+        criteria[criterion] = {
+            "p_best": by(r.p_best.tolist()),
+            "mean_rank": by(r.mean_rank.tolist()),
+            "rank_interval": by([[int(lo), int(hi)] for lo, hi in zip(r.rank_low, r.rank_high, strict=True)]),
+            "p_better": by([by(row.tolist()) for row in r.p_better]),
+            "n": r.n,
+        }
+    try:
+        pareto = pareto_probability(draws, materials)
+    except (ValueError, IndexError):
+        pareto = {}
+    return {"materials": list(materials), "criteria": criteria, "pareto": pareto, "orderings": ordering_checks(draws)}
+
+
+def ranking_markdown(report: dict) -> str:
+    """Markdown of :func:`rank_materials`: per criterion P(best) and expected rank; the Pareto set; orderings."""
+    materials = report["materials"]
+    lines = ["### P(best) and expected rank (94 % interval) per criterion", ""]
+    lines.append("| criterion | " + " | ".join(materials) + " |")
+    lines.append("|---|" + "---|" * len(materials))
+    for criterion, r in report["criteria"].items():
+        better = "lower" if CRITERIA[criterion] < 0 else "higher"
+        cells = []
+        for c in materials:
+            low, high = r["rank_interval"][c]
+            cells.append(f"{r['p_best'][c]:.2f}, rank {r['mean_rank'][c]:.1f} ({low}-{high})")
+        lines.append(f"| {criterion} ({better} is better) | " + " | ".join(cells) + " |")
+    if report["pareto"]:
+        lines += ["", f"### P(Pareto-optimal) over {', '.join(PARETO_CRITERIA)}", ""]
+        lines.append("| " + " | ".join(materials) + " |")
+        lines.append("|" + "---|" * len(materials))
+        lines.append("| " + " | ".join(f"{report['pareto'][c]:.2f}" for c in materials) + " |")
+        likely = [c for c in materials if report["pareto"][c] >= 0.9]
+        lines += ["", f"Pareto-optimal with probability >= 0.9: {', '.join(likely) or 'none'}."]
+    if report["orderings"]:
+        lines += ["", "### The paper's orderings on the posterior", "", "| metric | relation | probability |"]
+        lines.append("|---|---|---|")
+        for o in report["orderings"]:
+            shown = "about equal to" if o["relation"] == "=" else ">"
+            lines.append(f"| {o['metric']} | {o['a']} {shown} {o['b']} | {o['probability']:.2f} |")
+    return "\n".join(lines)
+
+
+__all__ = [
+    "CRITERIA",
+    "EQUAL_BAND",
+    "PARETO_CRITERIA",
+    "PUBLISHED_ORDERINGS",
+    "CriterionRanking",
+    "ordering_checks",
+    "pareto_probability",
+    "rank_criterion",
+    "rank_materials",
+    "ranking_markdown",
+]

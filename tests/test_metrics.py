@@ -1,0 +1,121 @@
+"""Posterior Table 3 metrics: draws from a result simulate the paper's protocol; the metrics of the generating
+parameters fall inside the posterior's spread; unfitted step parameters are flagged; bad results are refused."""
+
+import json
+
+import numpy as np
+import pytest
+
+from peano_bayes.cli import main
+from peano_bayes.errors import PeanoBayesInputError
+from peano_bayes.inference.results import to_inference_data
+from peano_bayes.metrics import (
+    STEP_METRICS,
+    compare_published,
+    load_result,
+    model_metrics,
+    parameter_draws,
+    posterior_metrics,
+)
+
+#: Metrics of the load cycles at the test pressure and the 0 kPa stretch: the fitted test informs them.
+LOAD_CYCLE_METRICS = ("hysteresis_loss", "free_strain", "energy_per_pressure", "stiffness_at_minus_1.5pct_0kPa")
+
+
+@pytest.fixture(scope="module")
+def result_dir(recovered, tmp_path_factory):
+    posterior, result, _, _, _ = recovered
+    idata = to_inference_data(posterior, result, seed=2, attrs={"material": "TP", "dataset": "virtual"})
+    out = tmp_path_factory.mktemp("result")
+    idata.to_netcdf(str(out / "posterior.nc"))
+    return out
+
+
+@pytest.fixture(scope="module")
+def predicted(result_dir):
+    return posterior_metrics(load_result(result_dir), n_draws=12, seed=0)
+
+
+def test_parameter_draws_take_sampled_fixed_and_prior_values(result_dir, recovered):
+    _, _, draws, truth, _ = recovered
+    sets, prior_only = parameter_draws(load_result(result_dir), 5, seed=1)
+    assert len(sets) == 5
+    assert "orifice_area_m2" in prior_only  # the step was not fitted
+    values = [s["tensile_ka_n_per_m"] for s in sets]
+    assert min(values) >= draws["tensile_ka_n_per_m"].min() and max(values) <= draws["tensile_ka_n_per_m"].max()
+    assert all(s["extension_k_n_per_m"] == truth["extension_k_n_per_m"] for s in sets)  # held at the fit's value
+    assert len({s["orifice_area_m2"] for s in sets}) == 5  # prior draws, not one value
+
+
+@pytest.mark.slow
+def test_metrics_of_the_truth_lie_within_the_posterior_spread(predicted, recovered):
+    """The posterior is tight around the generating parameters, so the metrics they give must sit within
+    4 sd of the predicted draws (plus 1 % of the value for the rig measurement's own discretization)."""
+    _, _, _, truth, _ = recovered
+    expected = model_metrics("TP", {k: v for k, v in truth.items() if not k.startswith("noise_")})
+    assert predicted.n_failed == 0
+    for name in LOAD_CYCLE_METRICS + ("blocking_force_per_pressure", "stroke"):
+        draws = predicted.draws[name]
+        assert np.all(np.isfinite(draws)), name
+        tolerance = 4 * np.std(draws) + 0.01 * abs(expected[name])
+        assert abs(np.mean(draws) - expected[name]) <= tolerance, (name, np.mean(draws), expected[name])
+
+
+@pytest.mark.slow
+def test_step_metrics_are_flagged_as_prior_when_the_step_was_not_fitted(predicted):
+    assert set(predicted.from_prior) == set(STEP_METRICS)
+    summary = predicted.summary()
+    assert all(summary[name]["from_prior"] for name in STEP_METRICS)
+    assert not summary["free_strain"]["from_prior"]
+    low, high = summary["free_strain"]["hdi_low"], summary["free_strain"]["hdi_high"]
+    assert low <= summary["free_strain"]["median"] <= high
+
+
+def test_compare_published_reports_whether_the_interval_holds_the_value():
+    summary = {
+        "hysteresis_loss": {"median": 0.2, "hdi_low": 0.15, "hdi_high": 0.3, "from_prior": False},
+        "energy_per_pressure": {"median": 4.5, "hdi_low": 4.0, "hdi_high": 5.0, "from_prior": False},
+        "stiffness_at_minus_1.5pct_0kPa": {
+            "median": 1.0,
+            "hdi_low": float("nan"),
+            "hdi_high": float("nan"),
+            "from_prior": False,
+        },
+    }
+    rows = {r["metric"]: r for r in compare_published("TP", summary) if r["metric"] in summary}
+    assert rows["hysteresis_loss"]["value"] == 0.225 and rows["hysteresis_loss"]["inside"] is True
+    assert rows["energy_per_pressure"]["value"] == 5.5 and rows["energy_per_pressure"]["inside"] is False
+    assert rows["stiffness_at_minus_1.5pct_0kPa"]["inside"] is None
+
+
+@pytest.mark.parametrize("case, expected", [("missing", "no such file"), ("garbage", "not a readable NetCDF")])
+def test_bad_result_exits_2_with_the_path_named(tmp_path, capsys, case, expected):
+    target = tmp_path / "missing"
+    if case == "garbage":
+        (tmp_path / "posterior.nc").write_text("not netcdf")
+        target = tmp_path
+    assert main(["metrics", str(target), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert expected in err and str(tmp_path) in err and "Traceback" not in err
+    assert not (tmp_path / "metrics.json").exists()
+
+
+def test_result_without_provenance_is_refused(tmp_path, result_dir):
+    import arviz as az
+
+    idata = az.from_netcdf(str(result_dir / "posterior.nc"))
+    del idata.posterior.attrs["material"]
+    idata.to_netcdf(str(tmp_path / "posterior.nc"))
+    with pytest.raises(PeanoBayesInputError, match="lacks the attribute.*material"):
+        load_result(tmp_path)
+
+
+@pytest.mark.slow
+def test_metrics_command_writes_metrics_json(result_dir, capsys):
+    assert main(["metrics", str(result_dir), "--draws", "3", "--no-progress", "--json"]) == 0
+    out = capsys.readouterr().out
+    report = json.loads(out.strip().splitlines()[-1])
+    written = json.loads((result_dir / "metrics.json").read_text())
+    assert report["material"] == written["material"] == "TP" and written["n_draws"] == 3
+    assert any(row["metric"] == "hysteresis_loss" for row in written["published"])
+    assert "| metric | unit | median |" in out

@@ -1,0 +1,73 @@
+"""Ranking with uncertainty on draws whose answer is known by construction."""
+
+import json
+
+import numpy as np
+import pytest
+
+from peano_bayes.cli import main
+from peano_bayes.ranking import CRITERIA, ordering_checks, pareto_probability, rank_criterion, rank_materials
+
+
+def _draws(rng, means, sd=0.1, n=4000):
+    """code -> metric -> (n,) normal draws with the given mean for every criterion."""
+    return {code: {c: rng.normal(mu, sd, n) for c in CRITERIA} for code, mu in means.items()}
+
+
+def test_probabilities_match_the_normal_theory(rng):
+    # A ~ N(1, 0.1), B ~ N(1.1, 0.1): P(B > A) = Phi(0.1 / (0.1 sqrt 2)) = 0.760.
+    draws = _draws(rng, {"A": 1.0, "B": 1.1})
+    r = rank_criterion(draws, "speed")
+    assert r.p_better[1, 0] == pytest.approx(0.760, abs=0.02)
+    assert r.p_better[0, 1] == pytest.approx(1 - 0.760, abs=0.02)
+    assert r.p_best.sum() == pytest.approx(1.0)
+    assert r.p_best[1] == pytest.approx(0.760, abs=0.02)
+    assert r.mean_rank[1] == pytest.approx(1.24, abs=0.02)
+
+
+def test_lower_is_better_for_hysteresis(rng):
+    draws = _draws(rng, {"A": 1.0, "B": 2.0})
+    assert rank_criterion(draws, "hysteresis_loss").p_best[0] == 1.0
+    assert rank_criterion(draws, "speed").p_best[1] == 1.0
+
+
+def test_pareto_set_by_construction(rng):
+    # B beats C on every criterion (C's hysteresis is the highest); A has the lowest hysteresis, so A and B
+    # are both Pareto-optimal and C never is.
+    draws = _draws(rng, {"A": 1.0, "B": 2.0, "C": 1.5}, sd=0.01)
+    draws["C"]["hysteresis_loss"] = draws["C"]["hysteresis_loss"] + 2.0
+    p = pareto_probability(draws)
+    assert p["A"] == 1.0 and p["B"] == 1.0 and p["C"] == 0.0
+
+
+def test_orderings_use_only_the_materials_present(rng):
+    draws = _draws(rng, {"TP": 2.0, "P": 1.0}, sd=0.01)
+    checks = ordering_checks(draws)
+    assert checks and all({c["a"], c["b"]} <= {"TP", "P"} for c in checks)
+    speed = next(c for c in checks if c["metric"] == "speed")
+    assert (speed["a"], speed["b"], speed["probability"]) == ("TP", "P", 1.0)
+    equal = next(c for c in checks if c["relation"] == "=")  # hysteresis: TP about equal to P
+    assert equal["probability"] == 0.0  # a factor of 2 apart
+
+
+def test_draws_not_finite_everywhere_are_left_out(rng):
+    draws = _draws(rng, {"A": 1.0, "B": 1.1}, n=100)
+    draws["A"]["speed"][:40] = np.nan
+    assert rank_criterion(draws, "speed").n == 60
+    draws["A"]["efficiency"][:] = np.nan
+    assert "efficiency" not in rank_materials(draws)["criteria"]
+
+
+def test_rank_command_writes_its_report_and_refuses_missing_metrics(tmp_path, rng, capsys):
+    for code, mu in {"TP": 1.0, "P": 1.1}.items():
+        (tmp_path / code).mkdir()
+        m = {"material": code, "draws": {c: rng.normal(mu, 0.1, 50).tolist() for c in CRITERIA}}
+        (tmp_path / code / "metrics.json").write_text(json.dumps(m))
+    assert main(["rank", str(tmp_path / "TP"), str(tmp_path / "P"), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert report["materials"] == ["TP", "P"] and (tmp_path / "ranking.md").exists()
+    (tmp_path / "X").mkdir()
+    assert main(["rank", str(tmp_path / "TP"), str(tmp_path / "X"), "--out", str(tmp_path / "new")]) == 2
+    err = capsys.readouterr().err
+    assert "metrics.json: no such file" in err and "Traceback" not in err
+    assert not (tmp_path / "new").exists()
