@@ -22,16 +22,20 @@ IDEAL_FREE_STRAIN = 1.0 - 2.0 / jnp.pi  # strain at theta = pi/2 (F = 0), 0.3634
 
 
 def _where_small(theta, series, exact):
-    """Select ``series(theta)`` below ``_SMALL`` and ``exact(theta)`` above, NaN-safe for gradients."""
+    """Select ``series(theta**2)`` below ``_SMALL`` and ``exact(theta)`` above, NaN-safe for gradients.
+
+    The series take ``t2 = theta**2`` and are written in Horner form: inside ``jit`` the half-angle is often
+    ``exp(log theta)``, and XLA rewrites every power ``theta**k`` of it as a separate ``exp(k log theta)``.
+    """
     small = theta < _SMALL
     safe = jnp.where(small, _SMALL, theta)  # keeps the unused branch finite under autodiff
-    return jnp.where(small, series(theta), exact(safe))
+    return jnp.where(small, series(theta * theta), exact(safe))
 
 
 def sinc(theta):
     """sin(theta)/theta [-]."""
     return _where_small(
-        theta, lambda t: 1.0 - t**2 / 6.0 + t**4 / 120.0 - t**6 / 5040.0, lambda t: jnp.sin(t) / t
+        theta, lambda t2: 1.0 - t2 * (1.0 / 6.0 - t2 * (1.0 / 120.0 - t2 / 5040.0)), lambda t: jnp.sin(t) / t
     )
 
 
@@ -39,7 +43,7 @@ def strain(theta):
     """Contraction strain of one ideal tube, 1 - sin(theta)/theta [-]."""
     return _where_small(
         theta,
-        lambda t: t**2 / 6.0 - t**4 / 120.0 + t**6 / 5040.0 - t**8 / 362880.0,
+        lambda t2: t2 * (1.0 / 6.0 - t2 * (1.0 / 120.0 - t2 * (1.0 / 5040.0 - t2 / 362880.0))),
         lambda t: 1.0 - jnp.sin(t) / t,
     )
 
@@ -53,22 +57,27 @@ def _sin_minus_tcos_over_t3(theta):
     """(sin(theta) - theta cos(theta))/theta^3, -> 1/3 at theta = 0."""
     return _where_small(
         theta,
-        lambda t: 1.0 / 3.0 - t**2 / 30.0 + t**4 / 840.0 - t**6 / 45360.0,
-        lambda t: (jnp.sin(t) - t * jnp.cos(t)) / t**3,
+        lambda t2: 1.0 / 3.0 - t2 * (1.0 / 30.0 - t2 * (1.0 / 840.0 - t2 / 45360.0)),
+        lambda t: (jnp.sin(t) - t * jnp.cos(t)) / (t * t * t),
     )
 
 
 def force_per_pressure(theta, width_m, length_m):
     """Tube force per unit pressure, w l cos(theta)/theta [N/Pa]; diverges as theta -> 0."""
-    return width_m * length_m * jnp.cos(theta) / theta
+    cos_over = _where_small(
+        theta,
+        lambda t2: (1.0 - t2 * (0.5 - t2 * (1.0 / 24.0 - t2 / 720.0))) / theta,
+        lambda t: jnp.cos(t) / t,  # shares cos(t) with the other closed forms
+    )
+    return width_m * length_m * cos_over
 
 
 def volume_factor(theta):
     """V/(w^2 l) = (theta - sin cos)/(2 theta^2) [-]; 0 at theta = 0, 1/pi at pi/2."""
     return _where_small(
         theta,
-        lambda t: t / 3.0 - t**3 / 15.0 + 2.0 * t**5 / 315.0,
-        lambda t: (t - jnp.sin(t) * jnp.cos(t)) / (2.0 * t**2),
+        lambda t2: theta * (1.0 / 3.0 - t2 * (1.0 / 15.0 - t2 * 2.0 / 315.0)),
+        lambda t: (t - jnp.sin(t) * jnp.cos(t)) / (2.0 * t * t),
     )
 
 
