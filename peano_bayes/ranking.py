@@ -86,18 +86,20 @@ def _joint(draws: dict, materials, names) -> np.ndarray:
 
 def rank_criterion(draws: dict, criterion: str, materials=None) -> CriterionRanking:
     """Rank ``materials`` (default: all keys of ``draws``) by ``criterion``; ``draws`` maps code -> metric ->
-    (n,) posterior predictive draws. Ties (equal draws) count as not better."""
+    (n,) posterior predictive draws. Ties (equal draws) count as not better; materials tied for best in a
+    draw share it equally, and tied materials share the better rank (1 + the number strictly better)."""
     materials = tuple(materials or draws)
     values = _joint(draws, materials, (criterion,))[..., 0]  # (n, m)
     if values.shape[0] == 0:
         raise ValueError(f"no draw has a finite {criterion} for every material")
-    order = np.argsort(np.argsort(-values, axis=1, kind="stable"), axis=1) + 1  # rank per draw, 1 = best
-    p_better = np.mean(values[:, :, None] > values[:, None, :], axis=0)
+    better = values[:, :, None] > values[:, None, :]  # [d, i, j]: i better than j in draw d
+    order = 1 + better.sum(axis=1)  # rank per draw, 1 = best
+    best = order == 1
     return CriterionRanking(
         criterion,
         materials,
-        np.mean(order == 1, axis=0),
-        p_better,
+        np.mean(best / best.sum(axis=1, keepdims=True), axis=0),
+        better.mean(axis=0),
         order.mean(axis=0),
         np.quantile(order, 0.03, axis=0, method="inverted_cdf"),
         np.quantile(order, 0.97, axis=0, method="inverted_cdf"),
@@ -139,12 +141,15 @@ def ordering_checks(draws: dict) -> list[dict]:
     return out
 
 
-def rank_materials(draws: dict) -> dict:
+def rank_materials(draws: dict, from_prior=()) -> dict:
     """Everything :mod:`peano_bayes.ranking` computes, as plain data: ``materials``; ``criteria`` (per
     criterion: ``p_best``, ``mean_rank``, ``rank_interval`` by material, ``p_better`` matrix rows by material,
-    ``n`` draws; criteria no draw defines are left out); ``pareto`` (P(Pareto-optimal) by material);
-    ``orderings`` (:func:`ordering_checks`). ``draws``: code -> metric -> (n,) values."""
+    ``n`` draws, ``from_prior``; criteria no draw defines are left out); ``pareto`` (P(Pareto-optimal) by
+    material); ``orderings`` (:func:`ordering_checks`). ``draws``: code -> metric -> (n,) values;
+    ``from_prior``: metrics the data did not inform in some material (flagged, e.g. step metrics of fits
+    without the step test)."""
     materials = tuple(draws)
+    from_prior = set(from_prior)
     criteria = {}
     for criterion in CRITERIA:
         try:
@@ -158,12 +163,14 @@ def rank_materials(draws: dict) -> dict:
             "rank_interval": by([[int(lo), int(hi)] for lo, hi in zip(r.rank_low, r.rank_high, strict=True)]),
             "p_better": by([by(row.tolist()) for row in r.p_better]),
             "n": r.n,
+            "from_prior": criterion in from_prior,
         }
     try:
         pareto = pareto_probability(draws, materials)
     except (ValueError, IndexError):
         pareto = {}
-    return {"materials": list(materials), "criteria": criteria, "pareto": pareto, "orderings": ordering_checks(draws)}
+    orderings = [{**o, "from_prior": o["metric"] in from_prior} for o in ordering_checks(draws)]
+    return {"materials": list(materials), "criteria": criteria, "pareto": pareto, "orderings": orderings}
 
 
 def ranking_markdown(report: dict) -> str:
@@ -174,6 +181,7 @@ def ranking_markdown(report: dict) -> str:
     lines.append("|---|" + "---|" * len(materials))
     for criterion, r in report["criteria"].items():
         better = "lower" if CRITERIA[criterion] < 0 else "higher"
+        better += ", prior only: not fitted" if r.get("from_prior") else ""
         cells = []
         for c in materials:
             low, high = r["rank_interval"][c]
@@ -191,7 +199,8 @@ def ranking_markdown(report: dict) -> str:
         lines.append("|---|---|---|")
         for o in report["orderings"]:
             shown = "about equal to" if o["relation"] == "=" else ">"
-            lines.append(f"| {o['metric']} | {o['a']} {shown} {o['b']} | {o['probability']:.2f} |")
+            flag = " (prior only: not fitted)" if o.get("from_prior") else ""
+            lines.append(f"| {o['metric']}{flag} | {o['a']} {shown} {o['b']} | {o['probability']:.2f} |")
     return "\n".join(lines)
 
 

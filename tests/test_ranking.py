@@ -25,6 +25,15 @@ def test_probabilities_match_the_normal_theory(rng):
     assert r.mean_rank[1] == pytest.approx(1.24, abs=0.02)
 
 
+def test_identical_materials_share_first_place(rng):
+    draws = _draws(rng, {"A": 1.0, "C": 0.5}, n=200)
+    draws["B"] = {c: v.copy() for c, v in draws["A"].items()}
+    r = rank_criterion(draws, "speed")
+    np.testing.assert_allclose(r.p_best, [0.5, 0.0, 0.5])
+    assert r.p_better[0, 2] == r.p_better[2, 0] == 0.0
+    assert r.mean_rank[0] == r.mean_rank[2] == 1.0 and r.mean_rank[1] == 3.0
+
+
 def test_lower_is_better_for_hysteresis(rng):
     draws = _draws(rng, {"A": 1.0, "B": 2.0})
     assert rank_criterion(draws, "hysteresis_loss").p_best[0] == 1.0
