@@ -317,7 +317,8 @@ def rank_command(args):
         from .errors import PeanoBayesInputError
 
         raise PeanoBayesInputError(f"material(s) given more than once: {', '.join(twice)}")
-    report = rank_materials({m["material"]: m["draws"] for m in metrics})
+    prior_only = {name for m in metrics for name, s in m.get("summary", {}).items() if s.get("from_prior")}
+    report = rank_materials({m["material"]: m["draws"] for m in metrics}, from_prior=prior_only)
     out = Path(args.out) if args.out else Path(args.results[0]).resolve().parent
     out.mkdir(parents=True, exist_ok=True)
     text = ranking_markdown(report)

@@ -221,8 +221,14 @@ def _fmt(x: float) -> str:
     return f"{x:.3g}" if math.isfinite(x) else str(x)
 
 
-def index_markdown(summaries: list[dict]) -> str:
-    """``results/index.md``: per material, a parameter table with 94 % intervals, fit quality, convergence."""
+def index_markdown(summaries: list[dict], metrics: dict | None = None, ranking: dict | None = None) -> str:
+    """``results/index.md``: per material, a parameter table with 94 % intervals, fit quality, convergence,
+    and (given ``metrics``: code -> metrics.json) the Table 3 metrics against the paper with links to the
+    figures; then (given ``ranking``, :func:`~peano_bayes.ranking.rank_materials`) the cross-material ranking."""
+    from .metrics import metrics_markdown
+    from .ranking import ranking_markdown
+
+    metrics = metrics or {}
     lines = ["# peano_bayes results", "", "Posterior means with 94 % highest-density intervals (SI units).", ""]
     for s in summaries:
         conv = s["convergence"]
@@ -256,7 +262,65 @@ def index_markdown(summaries: list[dict]) -> str:
             f"sampling {t['sampling_s']:.1f} s.",
             "",
         ]
+        m = metrics.get(s["material"])
+        if m:
+            code = s["material"]
+            lines += [
+                f"Table 3 metrics: posterior predictive median and 94 % HDI over {m['n_draws']} draws "
+                f"({m['n_failed']} failed to simulate), beside the paper's values:",
+                "",
+                metrics_markdown(code, m["summary"], m["published"]),
+                "",
+                f"Figures: [data over the predictive band]({code}/figures/predictive.png), "
+                f"[corner plot]({code}/figures/corner.png).",
+                "",
+            ]
+    if ranking and ranking.get("criteria"):
+        lines += [
+            "## Ranking across materials",
+            "",
+            "Figures: [parameters across materials](figures/forest.png), "
+            "[metrics against the paper](figures/published.png), [P(best) per criterion](figures/ranking.png).",
+            "",
+            ranking_markdown(ranking),
+            "",
+        ]
     return "\n".join(lines)
+
+
+def report_results(out_dir: str | Path, materials=BUNDLED_MATERIALS, *, n_draws: int = 100, log=print) -> dict:
+    """Metrics, figures, ranking and ``index.md`` for the finished materials of ``out_dir``.
+
+    Per material with a ``summary.json``: ``metrics.json`` (:func:`~peano_bayes.metrics.evaluate_result`, kept
+    if present) and ``figures/``; across them: ``ranking.json``/``ranking.md``, ``figures/`` and ``index.md``.
+    Returns the ranking (:func:`~peano_bayes.ranking.rank_materials`)."""
+    from .figures import cross_material_figures, material_figures
+    from .metrics import evaluate_result, load_result, read_metrics
+    from .ranking import rank_materials, ranking_markdown
+
+    out_dir = Path(out_dir)
+    finished = [c for c in materials if (out_dir / c / "summary.json").exists()]
+    summaries, metrics, results = [], {}, {}
+    for code in finished:
+        directory = out_dir / code
+        summaries.append(json.loads((directory / "summary.json").read_text()))
+        if not (directory / "metrics.json").exists():
+            log(f"{code}: Table 3 metrics from {n_draws} posterior draws ...")
+            evaluate_result(directory, n_draws=n_draws, progress=False)
+        metrics[code] = read_metrics(directory)
+        if not (directory / "figures" / "corner.png").exists():
+            material_figures(directory)
+            log(f"{code}: figures in {directory / 'figures'}")
+        results[code] = load_result(directory)
+    prior_only = {name for m in metrics.values() for name, s in m["summary"].items() if s["from_prior"]}
+    ranking = rank_materials({c: m["draws"] for c, m in metrics.items()}, from_prior=prior_only) if metrics else None
+    if ranking:
+        write_atomic_text(out_dir / "ranking.json", json.dumps(ranking, indent=1))
+        write_atomic_text(out_dir / "ranking.md", "# Ranking\n\n" + ranking_markdown(ranking) + "\n")
+        cross_material_figures(out_dir, results, metrics, ranking)
+    write_atomic_text(out_dir / "index.md", index_markdown(summaries, metrics, ranking))
+    log(f"wrote {out_dir / 'index.md'}")
+    return ranking or {}
 
 
 def _infer_bundled(code: str, out_dir: str, kwargs: dict) -> dict:
@@ -268,7 +332,8 @@ def _infer_bundled(code: str, out_dir: str, kwargs: dict) -> dict:
 def run_bundled(
     out_dir: str | Path = "results", *, materials=BUNDLED_MATERIALS, jobs: int = 1, log=print, **kwargs
 ) -> list[dict]:
-    """The main job: :func:`infer` on every bundled dataset, then ``out_dir/index.md``.
+    """The main job: :func:`infer` on every bundled dataset, then metrics, figures, ranking and
+    ``out_dir/index.md`` (:func:`report_results`).
 
     A material whose ``summary.json`` exists is not redone (delete it to redo); one with a saved sampler state
     resumes. ``jobs`` materials run at once, each in its own process (spawned: JAX must not be forked), with
@@ -302,7 +367,7 @@ def run_bundled(
             for future in as_completed(futures):
                 finished(futures[future], future.result())
     ordered = [summaries[c] for c in materials if c in summaries]
-    write_atomic_text(out_dir / "index.md", index_markdown(ordered))
+    report_results(out_dir, materials, log=log)
     return ordered
 
 
@@ -313,6 +378,7 @@ __all__ = [
     "index_markdown",
     "infer",
     "least_squares",
+    "report_results",
     "run_bundled",
     "walker_start",
 ]

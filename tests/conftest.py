@@ -43,8 +43,27 @@ def recovered():
     fitted = least_squares(posterior, prior, n_starts=8, seed=0)
     centre, covariance = walker_start(posterior, fitted)
     result = sample(
-        posterior, centre, covariance, n_walkers=16, seed=2, chunk=500, max_steps=6000, progress=False,
+        posterior,
+        centre,
+        covariance,
+        n_walkers=16,
+        seed=2,
+        chunk=500,
+        max_steps=6000,
+        progress=False,
         log=lambda m: None,
     )
     truth = {**truth, "noise_load_cycle_force_n": RigNoise().force_sd_n}
     return posterior, result, physical_draws(posterior, result.kept()), truth, fitted
+
+
+@pytest.fixture(scope="session")
+def result_dir(recovered, tmp_path_factory):
+    """The :func:`recovered` fit written as a result directory (``posterior.nc`` of material TP)."""
+    from peano_bayes.inference.results import to_inference_data
+
+    posterior, result, _, _, _ = recovered
+    idata = to_inference_data(posterior, result, seed=2, attrs={"material": "TP", "dataset": "virtual"})
+    out = tmp_path_factory.mktemp("result")
+    idata.to_netcdf(str(out / "posterior.nc"))
+    return out

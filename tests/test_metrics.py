@@ -8,7 +8,6 @@ import pytest
 
 from peano_bayes.cli import main
 from peano_bayes.errors import PeanoBayesInputError
-from peano_bayes.inference.results import to_inference_data
 from peano_bayes.metrics import (
     STEP_METRICS,
     compare_published,
@@ -20,15 +19,6 @@ from peano_bayes.metrics import (
 
 #: Metrics of the load cycles at the test pressure and the 0 kPa stretch: the fitted test informs them.
 LOAD_CYCLE_METRICS = ("hysteresis_loss", "free_strain", "energy_per_pressure", "stiffness_at_minus_1.5pct_0kPa")
-
-
-@pytest.fixture(scope="module")
-def result_dir(recovered, tmp_path_factory):
-    posterior, result, _, _, _ = recovered
-    idata = to_inference_data(posterior, result, seed=2, attrs={"material": "TP", "dataset": "virtual"})
-    out = tmp_path_factory.mktemp("result")
-    idata.to_netcdf(str(out / "posterior.nc"))
-    return out
 
 
 @pytest.fixture(scope="module")

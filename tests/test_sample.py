@@ -162,3 +162,15 @@ def test_killed_fit_resumes_without_losing_a_chunk(tmp_path):
     assert idata.log_likelihood["y"].shape[-1] == n_bins == idata.posterior_predictive["y"].shape[-1]
     assert np.all(np.isfinite(idata.log_likelihood["y"].values))
     assert set(summary["timings_s"]) == {"least_squares_s", "compile_s", "sampling_s"}
+
+    # The main job's report over the finished result: metrics, figures, ranking and index.md.
+    from peano_bayes.pipeline import report_results
+
+    ranking = report_results(out, materials=("TP",), n_draws=6, log=lambda m: None)
+    index = (out / "index.md").read_text()
+    assert "## TP" in index and "94 %" in index
+    assert "Table 3 metrics" in index and "| hysteresis_loss |" in index
+    for link in ("TP/figures/predictive.png", "TP/figures/corner.png", "figures/forest.png", "figures/ranking.png"):
+        assert f"({link})" in index and (out / link).exists(), link
+    assert "## Ranking across materials" in index and ranking["materials"] == ["TP"]
+    assert (out / "TP" / "metrics.json").exists() and (out / "ranking.json").exists()

@@ -1,0 +1,213 @@
+"""Figures of results: prepare the data (quantiles, intervals) from results, draw with :mod:`peano_bayes.plots`,
+save PNG and PDF atomically.
+
+Per material (``OUT/<code>/figures/``): ``predictive`` (data over the 94 % posterior predictive band, one run
+per condition of each fitted test) and ``corner`` (pairs of the physical parameters, arviz). Across materials
+(``OUT/figures/``): ``forest`` (each physical parameter's posterior per material), ``published`` (posterior
+metrics against the paper's values) and ``ranking`` (P(best) per criterion).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import matplotlib
+import matplotlib.ticker
+
+matplotlib.use("Agg")
+
+import arviz as az  # noqa: E402
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from . import plots  # noqa: E402
+from .inference.likelihood import NOISE_PARAMETERS  # noqa: E402
+from .metrics import METRIC_UNITS  # noqa: E402
+
+QUANTILES = (0.03, 0.5, 0.97)
+SIGNAL_LABEL = {"load_cycle": "force [N]", "blocking": "force [N]", "stroke": "strain [-]", "step": "strain [-]"}
+TEST_TITLE = {"load_cycle": "load cycle", "blocking": "blocking", "stroke": "stroke", "step": "step response"}
+
+
+def save(fig, path_stem: Path) -> list[Path]:
+    """Write ``fig`` as ``<stem>.png`` and ``<stem>.pdf``, each atomically; close it; return the paths."""
+    path_stem.parent.mkdir(parents=True, exist_ok=True)
+    written = []
+    for ext in ("png", "pdf"):
+        final = path_stem.with_suffix(f".{ext}")
+        tmp = final.with_name(f".{final.name}.tmp")
+        fig.savefig(tmp, format=ext, bbox_inches="tight")
+        os.replace(tmp, final)
+        written.append(final)
+    plt.close(fig)
+    return written
+
+
+def physical_names(idata) -> list[str]:
+    """The sampled physical parameters of a result (no noise scales, no specimen terms)."""
+    return [n for n in idata.posterior.data_vars if n not in NOISE_PARAMETERS and not n.startswith("specimen_")]
+
+
+def predictive_runs(idata) -> list[dict]:
+    """Per fitted test, one run per distinct condition (the first specimen's first run, and for load cycles
+    also the first run at the test pressure): ``test``, ``title``, ``time_s``, ``observed``, ``low``,
+    ``median``, ``high`` (94 % predictive quantiles of the bin means, posterior_predictive group)."""
+    obs = idata.observed_data
+    tests, specimens, runs = (np.asarray(obs[k].values) for k in ("test", "specimen", "run"))
+    time_s, y = np.asarray(obs["time_s"].values), np.asarray(obs["y"].values)
+    yrep = idata.posterior_predictive["y"].stack(sample=("chain", "draw")).transpose("sample", "bin").values
+    out = []
+    first = specimens[0]
+    for test in dict.fromkeys(tests):
+        candidates = sorted({int(r) for r in runs[(tests == test) & (specimens == first)]})
+        chosen = candidates[:1]
+        if test == "load_cycle" and len(candidates) > 1:
+            chosen.append(candidates[len(candidates) // 2])  # the paper's protocol: first half at 0 kPa
+        for run in chosen:
+            mask = (tests == test) & (specimens == first) & (runs == run)
+            low, median, high = np.quantile(yrep[:, mask], QUANTILES, axis=0)
+            out.append(
+                dict(
+                    test=test,
+                    title=f"{TEST_TITLE.get(test, test)}: specimen {first}, run {run}",
+                    time_s=time_s[mask],
+                    observed=y[mask],
+                    low=low,
+                    median=median,
+                    high=high,
+                )
+            )
+    return out
+
+
+def material_figures(result_dir: str | Path) -> list[Path]:
+    """``predictive`` and ``corner`` figures of one result directory into its ``figures/``."""
+    from .metrics import load_result
+
+    result_dir = Path(result_dir)
+    idata = load_result(result_dir)
+    code = idata.posterior.attrs["material"]
+    written = []
+    panels = predictive_runs(idata)
+    with plt.rc_context(plots.STYLE):
+        fig, axes = plt.subplots(1, len(panels), figsize=(3.2 * len(panels), 2.8), squeeze=False)
+        for ax, p in zip(axes[0], panels, strict=True):
+            plots.predictive_band(
+                ax,
+                p["time_s"],
+                p["observed"],
+                p["low"],
+                p["median"],
+                p["high"],
+                ylabel=SIGNAL_LABEL.get(p["test"], "signal"),
+                title=p["title"],
+            )
+        handles, labels = axes[0][0].get_legend_handles_labels()
+        fig.legend(handles, labels, loc="lower center", ncol=3, bbox_to_anchor=(0.5, -0.16), frameon=False)
+        fig.suptitle(f"{code}: bin means of the data over the posterior predictive", y=1.02)
+        written += save(fig, result_dir / "figures" / "predictive")
+        names = physical_names(idata)
+        axes = az.plot_pair(
+            idata,
+            var_names=names,
+            kind="scatter",
+            marginals=True,
+            scatter_kwargs={"alpha": 0.15, "s": 1.5},
+            textsize=9,
+            figsize=(max(2.2 * len(names), 5.0),) * 2,
+        )
+        for ax in np.ravel(axes):
+            ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(3))
+            ax.yaxis.set_major_locator(matplotlib.ticker.MaxNLocator(4))
+            ax.xaxis.label.set_fontsize(8)
+            ax.yaxis.label.set_fontsize(8)
+        fig = np.ravel(axes)[0].figure
+        fig.suptitle(f"{code}: posterior of the physical parameters (SI units)", y=1.0)
+        written += save(fig, result_dir / "figures" / "corner")
+    return written
+
+
+def _units(idata) -> dict:
+    return json.loads(idata.posterior.attrs.get("units", "{}"))
+
+
+def forest_data(results: dict) -> dict:
+    """parameter -> (materials, median, low, high, unit) over ``results`` (code -> InferenceData), 94 % HDI."""
+    out = {}
+    for code, idata in results.items():
+        units = _units(idata)
+        for name in physical_names(idata):
+            values = idata.posterior[name].values.ravel()
+            low, high = az.hdi(values, hdi_prob=0.94)
+            entry = out.setdefault(name, ([], [], [], [], units.get(name, "")))
+            for lst, v in zip(entry[:4], (code, float(np.median(values)), float(low), float(high)), strict=True):
+                lst.append(v)
+    return out
+
+
+def published_data(metrics: dict) -> dict:
+    """metric -> (materials, median, low, high, published) for metrics with a published value in any
+    material; ``metrics``: code -> the ``metrics.json`` of :func:`peano_bayes.metrics.evaluate_result`."""
+    out = {}
+    for code, m in metrics.items():
+        published = {row["metric"]: row["value"] for row in m["published"]}
+        for name, s in m["summary"].items():
+            if name not in published:
+                continue
+            entry = out.setdefault(name, ([], [], [], [], []))
+            for lst, v in zip(entry, (code, s["median"], s["hdi_low"], s["hdi_high"], published[name]), strict=True):
+                lst.append(v)
+    return out
+
+
+def _grid(n: int, width: float = 3.0, height: float = 2.3):
+    cols = min(n, 4)
+    rows = -(-n // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(width * cols, height * rows), squeeze=False)
+    for ax in axes.ravel()[n:]:
+        ax.set_visible(False)
+    return fig, axes.ravel()[:n]
+
+
+def cross_material_figures(out_dir: str | Path, results: dict, metrics: dict, ranking: dict | None) -> list[Path]:
+    """``forest``, ``published`` and ``ranking`` figures into ``out_dir/figures``; ``results``: code ->
+    InferenceData; ``metrics``: code -> metrics.json content; ``ranking``: the output of
+    :func:`~peano_bayes.ranking.rank_materials`."""
+    out_dir = Path(out_dir)
+    written = []
+    with plt.rc_context(plots.STYLE):
+        forest = forest_data(results)
+        if forest:
+            fig, axes = _grid(len(forest))
+            for ax, (name, (codes, med, low, high, unit)) in zip(axes, forest.items(), strict=True):
+                wide = min(low) > 0 and max(high) > 10 * min(low)  # a log axis only where it spans a decade
+                plots.forest(ax, codes, med, low, high, xlabel=f"[{unit}]", log=wide, title=name)
+            fig.suptitle("Posterior median and 94 % HDI of each physical parameter", y=1.01)
+            fig.tight_layout()
+            written += save(fig, out_dir / "figures" / "forest")
+        published = published_data(metrics)
+        if published:
+            fig, axes = _grid(len(published))
+            for ax, (name, (codes, med, low, high, pub)) in zip(axes, published.items(), strict=True):
+                plots.published_versus_posterior(
+                    ax, codes, med, low, high, pub, xlabel=f"[{METRIC_UNITS[name]}]", title=name
+                )
+            axes[0].legend(loc="best")
+            fig.suptitle("Posterior predictive metrics (94 % HDI) against the published values (x)", y=1.01)
+            fig.tight_layout()
+            written += save(fig, out_dir / "figures" / "published")
+        if ranking and ranking["criteria"]:
+            codes = ranking["materials"]
+            criteria = list(ranking["criteria"])
+            matrix = [[ranking["criteria"][c]["p_best"][m] for m in codes] for c in criteria]
+            fig, ax = plt.subplots(figsize=(1.0 * len(codes) + 3.0, 0.45 * len(criteria) + 1.2))
+            plots.probability_heatmap(
+                ax, matrix, criteria, codes, title="P(best) per criterion", colorbar_label="P(best) [-]"
+            )
+            written += save(fig, out_dir / "figures" / "ranking")
+    return written
+
+
+__all__ = ["cross_material_figures", "forest_data", "material_figures", "predictive_runs", "published_data", "save"]

@@ -1,0 +1,118 @@
+"""Plot functions: each takes prepared data (NumPy arrays, plain dicts) and matplotlib axes, draws, and
+computes nothing; :mod:`peano_bayes.figures` prepares the data from results and saves the figures.
+
+One look for every figure (:data:`STYLE`, used with ``matplotlib.rc_context``); axis labels carry units.
+"""
+
+from __future__ import annotations
+
+import matplotlib.ticker
+import numpy as np
+
+#: rcParams shared by every figure.
+STYLE = {
+    "figure.dpi": 110,
+    "savefig.dpi": 150,
+    "font.size": 9,
+    "axes.titlesize": 10,
+    "axes.labelsize": 9,
+    "legend.fontsize": 8,
+    "axes.spines.top": False,
+    "axes.spines.right": False,
+    "axes.grid": True,
+    "grid.alpha": 0.25,
+}
+DATA_COLOUR = "0.15"
+MODEL_COLOUR = "#1f77b4"
+PUBLISHED_COLOUR = "#d62728"
+
+
+def predictive_band(ax, time_s, observed, low, median, high, *, ylabel: str, title: str = "", label_data="data"):
+    """Observed bin means (points) over the posterior predictive median (line) and its interval (band), for
+    one run; all arrays (n,) against ``time_s`` [s]."""
+    ax.fill_between(time_s, low, high, color=MODEL_COLOUR, alpha=0.3, lw=0, label="94 % predictive interval")
+    ax.plot(time_s, median, color=MODEL_COLOUR, lw=1.0, label="predictive median")
+    ax.plot(time_s, observed, ".", color=DATA_COLOUR, ms=1.5, label=label_data)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel(ylabel)
+    if title:
+        ax.set_title(title)
+
+
+def forest(ax, labels, centre, low, high, *, xlabel: str, log: bool = False, title: str = ""):
+    """One row per label: ``centre`` with the interval ``low``-``high`` (all (k,)), top to bottom."""
+    y = np.arange(len(labels))[::-1]
+    ax.errorbar(
+        centre,
+        y,
+        xerr=[np.subtract(centre, low), np.subtract(high, centre)],
+        fmt="o",
+        color=MODEL_COLOUR,
+        ms=4,
+        capsize=2,
+        lw=1.2,
+    )
+    ax.set_yticks(y, labels)
+    ax.set_xlabel(xlabel)
+    ax.grid(axis="y", visible=False)
+    if log:
+        ax.set_xscale("log")
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    else:
+        ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(4))  # no overlapping tick labels
+    if title:
+        ax.set_title(title)
+
+
+def published_versus_posterior(ax, labels, centre, low, high, published, *, xlabel: str, title: str = ""):
+    """Posterior median and interval per label (as :func:`forest`) with the published value as a red cross
+    (NaN where the paper gives none)."""
+    forest(ax, labels, centre, low, high, xlabel=xlabel, title=title)
+    y = np.arange(len(labels))[::-1]
+    ax.plot(published, y, "x", color=PUBLISHED_COLOUR, ms=6, mew=1.5, label="published")
+
+
+def probability_heatmap(ax, matrix, row_labels, column_labels, *, title: str = "", colorbar_label: str = "probability"):
+    """A (rows, columns) probability matrix in [0, 1] with its values written in the cells."""
+    image = ax.imshow(matrix, vmin=0.0, vmax=1.0, cmap="viridis", aspect="auto")
+    ax.set_xticks(range(len(column_labels)), column_labels, rotation=30, ha="right")
+    ax.set_yticks(range(len(row_labels)), row_labels)
+    ax.grid(False)
+    for i in range(len(row_labels)):
+        for j in range(len(column_labels)):
+            value = matrix[i][j]
+            if np.isfinite(value):
+                ax.text(
+                    j,
+                    i,
+                    f"{value:.2f}",
+                    ha="center",
+                    va="center",
+                    fontsize=7,
+                    color="white" if value < 0.6 else "black",
+                )
+    ax.figure.colorbar(image, ax=ax, label=colorbar_label, shrink=0.8)
+    if title:
+        ax.set_title(title)
+
+
+def recommendation_bars(ax, labels, probability, *, title: str = ""):
+    """Horizontal bars of each candidate design's probability of meeting the requirement, best on top."""
+    y = np.arange(len(labels))[::-1]
+    ax.barh(y, probability, color=MODEL_COLOUR)
+    ax.set_yticks(y, labels)
+    ax.set_xlim(0, 1)
+    ax.set_xlabel("P(meets the requirement) [-]")
+    ax.grid(axis="y", visible=False)
+    if title:
+        ax.set_title(title)
+
+
+__all__ = [
+    "STYLE",
+    "forest",
+    "predictive_band",
+    "probability_heatmap",
+    "published_versus_posterior",
+    "recommendation_bars",
+]

@@ -1,0 +1,100 @@
+"""Figures: plot functions draw what they are given with unit-carrying labels; the figure builders write PNG
+and PDF for a real result (the shared recovery fit) and across materials."""
+
+import re
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from peano_bayes import plots  # noqa: E402
+from peano_bayes.figures import (  # noqa: E402
+    cross_material_figures,
+    forest_data,
+    material_figures,
+    predictive_runs,
+    published_data,
+)
+from peano_bayes.metrics import evaluate_result, load_result  # noqa: E402
+from peano_bayes.ranking import rank_materials  # noqa: E402
+
+UNIT = re.compile(r"\[[^\]]+\]")
+
+
+def _is_picture(path):
+    image = plt.imread(path)
+    return image.ndim == 3 and min(image.shape[:2]) > 100 and float(np.std(image)) > 0.0
+
+
+def test_predictive_band_draws_the_given_arrays_with_units():
+    t = np.linspace(0.0, 1.0, 5)
+    fig, ax = plt.subplots()
+    plots.predictive_band(ax, t, t + 0.1, t - 1, t, t + 1, ylabel="force [N]", title="x")
+    assert UNIT.search(ax.get_xlabel()) and UNIT.search(ax.get_ylabel())
+    line = next(line for line in ax.get_lines() if line.get_label() == "predictive median")
+    np.testing.assert_array_equal(line.get_ydata(), t)  # drawn as given: nothing recomputed
+    plt.close(fig)
+
+
+def test_forest_and_published_mark_each_material_and_value():
+    fig, ax = plt.subplots()
+    plots.published_versus_posterior(
+        ax, ["A", "B"], [1.0, 2.0], [0.5, 1.5], [1.5, 2.5], [1.2, np.nan], xlabel="[N/MPa]", title="m"
+    )
+    assert [t.get_text() for t in ax.get_yticklabels()] == ["A", "B"]
+    published = next(line for line in ax.get_lines() if line.get_label() == "published")
+    np.testing.assert_array_equal(published.get_xdata(), [1.2, np.nan])
+    plt.close(fig)
+
+
+def test_probability_heatmap_writes_every_finite_cell():
+    fig, ax = plt.subplots()
+    plots.probability_heatmap(ax, [[0.25, 0.75], [np.nan, 1.0]], ["r1", "r2"], ["c1", "c2"])
+    assert sorted(t.get_text() for t in ax.texts) == ["0.25", "0.75", "1.00"]
+    plt.close(fig)
+
+
+def test_predictive_runs_of_a_result_bracket_their_median(result_dir):
+    runs = predictive_runs(load_result(result_dir))
+    assert {r["test"] for r in runs} == {"load_cycle"}
+    for r in runs:
+        assert r["time_s"].shape == r["observed"].shape == r["median"].shape
+        assert np.all(r["low"] <= r["median"]) and np.all(r["median"] <= r["high"])
+        # the data scatter around the predictive median at about the noise (0.2 N per raw sample)
+        assert np.sqrt(np.mean((r["observed"] - r["median"]) ** 2)) < 0.5
+
+
+def test_material_and_cross_material_figures_are_written(result_dir, tmp_path):
+    written = material_figures(result_dir)
+    names = sorted(p.name for p in written)
+    assert names == ["corner.pdf", "corner.png", "predictive.pdf", "predictive.png"]
+    assert all(p.stat().st_size > 1000 for p in written)
+    assert all(_is_picture(p) for p in written if p.suffix == ".png")
+    assert not list((result_dir / "figures").glob(".*tmp"))  # nothing half-written left behind
+
+    idata = load_result(result_dir)
+    metrics = evaluate_result(result_dir, n_draws=8, progress=False)
+    # Two "materials" from one result: the cross-material plumbing needs no second fit.
+    results = {"TP": idata, "P": idata}
+    per_material = {"TP": metrics, "P": {**metrics, "material": "P"}}
+    ranking = rank_materials({c: m["draws"] for c, m in per_material.items()})
+    forest = forest_data(results)
+    assert set(forest) == set(idata.posterior.data_vars) - {"noise_load_cycle_force_n"}
+    for codes, median, low, high, unit in forest.values():
+        assert codes == ["TP", "P"] and unit
+        assert all(lo <= m <= hi for lo, m, hi in zip(low, median, high, strict=True))
+    assert "hysteresis_loss" in published_data(per_material)
+    out = cross_material_figures(tmp_path, results, per_material, ranking)
+    assert sorted(p.name for p in out) == sorted(
+        f"{stem}.{ext}" for stem in ("forest", "published", "ranking") for ext in ("png", "pdf")
+    )
+    assert all(_is_picture(p) for p in out if p.suffix == ".png")
+
+
+@pytest.mark.parametrize("builder", [forest_data, published_data])
+def test_builders_of_nothing_give_nothing(builder):
+    assert builder({}) == {}
