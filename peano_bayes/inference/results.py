@@ -120,6 +120,7 @@ def to_inference_data(posterior: Posterior, result: SampleResult, *, seed: int, 
 
 
 def _attrs(posterior: Posterior, result: SampleResult, seed: int, extra: dict | None) -> dict:
+    g = posterior.observations.geometry
     return {
         "seed": seed,
         "package_versions": json.dumps(package_versions()),
@@ -129,6 +130,14 @@ def _attrs(posterior: Posterior, result: SampleResult, seed: int, extra: dict | 
         "prior_text": posterior.prior.text,
         "likelihood_family": posterior.family,
         "bin_sizes": json.dumps(dict(posterior.observations.bin_sizes)),
+        "geometry": json.dumps(
+            {
+                "n_tubes": int(g.n_tubes),
+                "tube_width_m": float(g.tube_width_m),
+                "tube_length_m": float(g.tube_length_m),
+                "channel_width_frac": float(g.channel_width_frac),
+            }
+        ),
         "converged": int(result.convergence.converged),
         "units": json.dumps(
             {**dict(posterior.prior.units), **{n: "-" for n in posterior.names[posterior.prior.ndim :]}}

@@ -6,7 +6,7 @@ from signals; ``reference`` holds the paper's two reference models (Sarosi, Veal
 """
 
 from . import elements, metrics, pouch, reference
-from .geometry import PAPER_GEOMETRY, VALIDATION_GEOMETRY, Geometry
+from .geometry import PAPER_GEOMETRY, VALIDATION_GEOMETRY, Geometry, scale_parameters
 from .model import (
     DEFAULT_CONFIG,
     ELASTIC_CONFIG,
@@ -23,6 +23,7 @@ from .simulate import (
     simulate_load_cycle,
     simulate_step,
     simulate_stroke,
+    static_force,
     static_strain,
 )
 
@@ -43,9 +44,11 @@ __all__ = [
     "metrics",
     "pouch",
     "reference",
+    "scale_parameters",
     "simulate_blocking",
     "simulate_load_cycle",
     "simulate_step",
     "simulate_stroke",
+    "static_force",
     "static_strain",
 ]

@@ -1,4 +1,4 @@
-"""Peano muscle geometry: n identical tubes in series along the load."""
+"""Peano muscle geometry: n identical tubes in series along the load, and how wall parameters scale with it."""
 
 from __future__ import annotations
 
@@ -39,3 +39,36 @@ class Geometry(eqx.Module):
 PAPER_GEOMETRY = Geometry()
 #: The validation muscle of the paper's section 2 (Table 2: w = 15 mm, l = 46 mm, four tubes).
 VALIDATION_GEOMETRY = Geometry(tube_width_m=0.015, tube_length_m=0.046)
+
+
+#: Parameter-name stems whose value scales as l / L (force over strain: tube length l across the load, flat
+#: length L = n w along it), as l / L^2, or as 1 / l; all others are wall or rig properties that do not scale.
+_PER_STRAIN = ("tensile_ka_n_per_m", "extension_k_n_per_m", "friction_stiffness_n_per_m", "series_creep_c_ns_per_m")
+_PER_STRAIN_SQUARED = ("tensile_kb_n_per_m2",)
+
+
+def _scaling(name: str, across: float, along: float) -> float:
+    if name in _PER_STRAIN or (name.startswith(("parallel_maxwell", "series_kelvin")) and name.endswith("_k_n_per_m")):
+        return across / along
+    if name in _PER_STRAIN_SQUARED:
+        return across / along**2
+    if name == "friction_force_n":
+        return across
+    if name == "mount_compliance_m_per_n":
+        return 1.0 / across
+    return 1.0
+
+
+def scale_parameters(params: dict, reference: Geometry, target: Geometry) -> dict:
+    """Parameters fitted on a ``reference`` muscle, carried to a ``target`` geometry of the same walls.
+
+    Muscle-level stiffnesses [N/m] of the walls act in parallel across the tube length l and in series along
+    the flat length L = n w, so they scale as l/L (``tensile_kb`` as l/L^2, its stretch being quadratic);
+    the constant friction force and a mount tab across the muscle scale with l (its compliance as 1/l).
+    Bending stiffnesses [N], pressure fractions, exponents, time constants, the threshold pressure, the
+    inlet and load damping are wall, fluid or rig properties and do not change. With these rules the force at
+    a given strain and pressure is exactly proportional to l and independent of n at fixed w (tested).
+    """
+    across = target.tube_length_m / reference.tube_length_m
+    along = target.flat_length_m / reference.flat_length_m
+    return {name: value * _scaling(name, across, along) for name, value in params.items()}

@@ -218,6 +218,17 @@ def static_strain(
     return link.shortening_m / geometry.flat_length_m
 
 
+def static_force(
+    params, pressure_pa, strain, *, config: ModelConfig = DEFAULT_CONFIG, geometry: Geometry = PAPER_GEOMETRY
+):
+    """Force [N] of a relaxed muscle (no history) held at contraction ``strain`` [-] at ``pressure_pa`` [Pa].
+
+    The counterpart of :func:`static_strain`; at ``strain = 0`` it is the blocking force.
+    """
+    _, link = _relaxed_start(_strain_residual, strain, pressure_pa, params, config, geometry, increasing=True)
+    return total_force(strain, link, params, config, geometry)[0]
+
+
 def _strain_controlled(params, time_s, strain, pressure_pa, config, geometry) -> ForceResult:
     z0, link0 = _relaxed_start(_strain_residual, strain[0], pressure_pa[0], params, config, geometry, True)
     force0, state0 = total_force(strain[0], link0, params, config, geometry)
@@ -390,5 +401,6 @@ __all__ = [
     "simulate_load_cycle",
     "simulate_step",
     "simulate_stroke",
+    "static_force",
     "static_strain",
 ]
