@@ -337,3 +337,36 @@ def _rank_arguments(p):
 
 
 rank_command.arguments = _rank_arguments
+
+
+@command("recommend", "design recommendation: candidate materials and geometries scored against a requirement")
+def recommend_command(args):
+    from pathlib import Path
+
+    from .figures import recommendation_figure
+    from .inference.results import write_atomic_text
+    from .recommend import recommend, recommendation_markdown
+
+    report = recommend(args.spec, args.results)  # validates the spec and every result before writing
+    spec = Path(args.spec)
+    out = Path(args.out) if args.out else spec.parent
+    out.mkdir(parents=True, exist_ok=True)
+    stem = out / f"{spec.stem}_recommendation"
+    text = recommendation_markdown(report)
+    write_atomic_text(stem.with_suffix(".json"), json.dumps(report, indent=1))
+    write_atomic_text(stem.with_suffix(".md"), f"# Recommendation for {spec.name}\n\n{text}\n")
+    recommendation_figure(report, stem)
+    print(text)
+    print(f"wrote {stem}.json, .md, .png and .pdf")
+    return report
+
+
+def _recommend_arguments(p):
+    p.add_argument("--spec", required=True, metavar="SPEC.toml", help="the requirement and the candidate grid")
+    p.add_argument(
+        "--results", default=None, metavar="DIR", help="material results (default: the spec's [results] dir)"
+    )
+    p.add_argument("--out", default=None, metavar="DIR", help="where the outputs go (default: beside the spec)")
+
+
+recommend_command.arguments = _recommend_arguments

@@ -210,4 +210,27 @@ def cross_material_figures(out_dir: str | Path, results: dict, metrics: dict, ra
     return written
 
 
-__all__ = ["cross_material_figures", "forest_data", "material_figures", "predictive_runs", "published_data", "save"]
+def recommendation_figure(report: dict, path_stem: Path, top: int = 12) -> list[Path]:
+    """Bar chart of the ``top`` candidates' probability of meeting the requirement (a :func:`recommend` report)."""
+    shown = report["candidates"][:top]
+    labels = [
+        f"{c['material']} {c['n_tubes']}x {c['tube_width_mm']:g}x{c['tube_length_mm']:g} mm ({c['binding']})"
+        for c in shown
+    ]
+    with plt.rc_context(plots.STYLE):
+        fig, ax = plt.subplots(figsize=(6.5, 0.32 * len(shown) + 1.2))
+        plots.recommendation_bars(
+            ax, labels, [c["probability"] for c in shown], title="Candidates (binding requirement in brackets)"
+        )
+        return save(fig, Path(path_stem))
+
+
+__all__ = [
+    "cross_material_figures",
+    "forest_data",
+    "material_figures",
+    "predictive_runs",
+    "published_data",
+    "recommendation_figure",
+    "save",
+]

@@ -1,0 +1,338 @@
+"""Design recommendation: which material and geometry meet a requirement, and how probably.
+
+A requirement (``[requirement]`` of a spec TOML) asks for at least ``force_n`` [N] at contraction strain
+``contraction`` [-] with the pressure at most ``max_pressure_kpa``, and optionally bounds the muscle's width
+(``max_width_mm``: the tube length, across the load), its length (``max_length_mm``: the flat length n w), its
+inflated thickness (``max_thickness_mm``) and its hysteresis loss (``max_hysteresis`` [-]). Candidates
+(``[candidates]``) are every combination of material (a result directory each) x ``n_tubes`` x
+``tube_width_mm`` x ``tube_length_mm``. Each is scored by the posterior probability of meeting every
+requirement at once, over joint posterior draws of its material:
+
+- force: :func:`~peano_bayes.physics.static_force` of the relaxed muscle at the maximum pressure, with the
+  material's parameters carried to the candidate geometry by :func:`~peano_bayes.physics.scale_parameters`;
+- hysteresis loss: the material's posterior predictive Table 3 hysteresis (``metrics.json``; paired with the
+  force by draw). Hysteresis is a ratio of energies and is taken as independent of geometry (an assumption);
+- width, length, thickness: geometry alone. Thickness is the fully inflated bound 2 w / pi of round tubes.
+
+Candidates are ranked by that probability, then by the force margin; each carries the median margin of every
+requirement and its *binding* requirement, the one least likely to hold.
+"""
+
+from __future__ import annotations
+
+import functools
+import itertools
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .errors import PeanoBayesInputError, did_you_mean
+from .physics import Geometry, scale_parameters, static_force
+from .physics.pouch import IDEAL_FREE_STRAIN
+
+_REQUIREMENT_KEYS = {
+    "force_n": "minimum force [N]",
+    "contraction": "contraction strain at which the force is needed [-]",
+    "max_pressure_kpa": "maximum supply pressure [kPa]",
+    "max_width_mm": "maximum muscle width, the tube length [mm]",
+    "max_length_mm": "maximum flat muscle length n w [mm]",
+    "max_thickness_mm": "maximum inflated thickness [mm]",
+    "max_hysteresis": "maximum hysteresis loss [-]",
+}
+_REQUIRED = ("force_n", "contraction", "max_pressure_kpa")
+_CANDIDATE_KEYS = ("materials", "n_tubes", "tube_width_mm", "tube_length_mm")
+_SECTIONS = ("requirement", "candidates", "results")
+
+
+@dataclass(frozen=True)
+class Requirement:
+    """What the muscle must do (SI units); ``None`` where the spec sets no bound."""
+
+    force_n: float
+    contraction: float
+    max_pressure_pa: float
+    max_width_m: float | None = None
+    max_length_m: float | None = None
+    max_thickness_m: float | None = None
+    max_hysteresis: float | None = None
+
+
+@dataclass(frozen=True)
+class Spec:
+    """A parsed spec: the requirement, the candidate grid and where the material results are."""
+
+    requirement: Requirement
+    materials: tuple[str, ...]
+    n_tubes: tuple[int, ...]
+    tube_width_m: tuple[float, ...]
+    tube_length_m: tuple[float, ...]
+    results_dir: Path
+    n_draws: int
+    source: Path
+
+
+def _number(value, where: str, *, positive: bool = True) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise PeanoBayesInputError(f"{where}: expected a finite number, got {value!r}")
+    if positive and not value > 0:
+        raise PeanoBayesInputError(f"{where}: expected a positive number, got {value!r}")
+    return float(value)
+
+
+def _list(value, where: str, kind) -> tuple:
+    if not isinstance(value, list) or not value:
+        raise PeanoBayesInputError(f"{where}: expected a non-empty list, got {value!r}")
+    if kind is int:
+        bad = [v for v in value if isinstance(v, bool) or not isinstance(v, int) or v < 1]
+        if bad:
+            raise PeanoBayesInputError(f"{where}: expected whole numbers of tubes >= 1, got {bad[0]!r}")
+        return tuple(value)
+    if kind is str:
+        bad = [v for v in value if not isinstance(v, str) or not v]
+        if bad:
+            raise PeanoBayesInputError(f"{where}: expected material codes (strings), got {bad[0]!r}")
+        return tuple(value)
+    return tuple(_number(v, where) for v in value)
+
+
+def _unknown(table: dict, known, where: str) -> None:
+    for key in table:
+        if key not in known:
+            raise PeanoBayesInputError(
+                f"{where}: unknown key {key!r}{did_you_mean(key, known)}; expected one of {', '.join(known)}"
+            )
+
+
+def load_spec(path: str | Path) -> Spec:
+    """Read and validate a spec TOML; a bad or impossible requirement raises :class:`PeanoBayesInputError`
+    naming the file, the key, the value seen and what was expected."""
+    path = Path(path)
+    try:
+        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise PeanoBayesInputError(f"{path}: no such spec file") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+        raise PeanoBayesInputError(f"{path}: not valid TOML ({err})") from None
+    _unknown(raw, _SECTIONS, str(path))
+    req = raw.get("requirement")
+    if not isinstance(req, dict):
+        raise PeanoBayesInputError(f"{path}: missing table [requirement] (needs {', '.join(_REQUIRED)})")
+    _unknown(req, _REQUIREMENT_KEYS, f"{path} [requirement]")
+    for key in _REQUIRED:
+        if key not in req:
+            raise PeanoBayesInputError(f"{path} [requirement]: missing {key!r} ({_REQUIREMENT_KEYS[key]})")
+    at = lambda key: f"{path} [requirement] {key}"  # noqa: E731
+    contraction = _number(req["contraction"], at("contraction"))
+    if contraction >= IDEAL_FREE_STRAIN:
+        raise PeanoBayesInputError(
+            f"{at('contraction')}: impossible: {contraction:g} asked, but a Peano muscle contracts at most "
+            f"{float(IDEAL_FREE_STRAIN):.3f} (ideal tubes at zero load, 1 - 2/pi)"
+        )
+    pressure = _number(req["max_pressure_kpa"], at("max_pressure_kpa"))
+    if pressure > 1000.0:
+        raise PeanoBayesInputError(
+            f"{at('max_pressure_kpa')}: expected at most 1000 kPa (the model's range), got {pressure:g}"
+        )
+    hysteresis = req.get("max_hysteresis")
+    if hysteresis is not None and not 0.0 < _number(hysteresis, at("max_hysteresis")) <= 1.0:
+        raise PeanoBayesInputError(f"{at('max_hysteresis')}: expected a fraction in (0, 1], got {hysteresis!r}")
+    mm = lambda key: None if key not in req else 1e-3 * _number(req[key], at(key))  # noqa: E731
+    requirement = Requirement(
+        force_n=_number(req["force_n"], at("force_n")),
+        contraction=contraction,
+        max_pressure_pa=1e3 * pressure,
+        max_width_m=mm("max_width_mm"),
+        max_length_m=mm("max_length_mm"),
+        max_thickness_m=mm("max_thickness_mm"),
+        max_hysteresis=None if hysteresis is None else float(hysteresis),
+    )
+    cand = raw.get("candidates", {})
+    if not isinstance(cand, dict):
+        raise PeanoBayesInputError(f"{path}: [candidates] must be a table, got {cand!r}")
+    _unknown(cand, _CANDIDATE_KEYS, f"{path} [candidates]")
+    res = raw.get("results", {})
+    if not isinstance(res, dict):
+        raise PeanoBayesInputError(f"{path}: [results] must be a table, got {res!r}")
+    _unknown(res, ("dir", "n_draws"), f"{path} [results]")
+    n_draws = res.get("n_draws", 100)
+    if isinstance(n_draws, bool) or not isinstance(n_draws, int) or n_draws < 1:
+        raise PeanoBayesInputError(f"{path} [results] n_draws: expected a whole number >= 1, got {n_draws!r}")
+    where = lambda key: f"{path} [candidates] {key}"  # noqa: E731
+    return Spec(
+        requirement=requirement,
+        materials=_list(cand["materials"], where("materials"), str) if "materials" in cand else (),
+        n_tubes=_list(cand.get("n_tubes", [4]), where("n_tubes"), int),
+        tube_width_m=tuple(1e-3 * w for w in _list(cand.get("tube_width_mm", [15.0]), where("tube_width_mm"), float)),
+        tube_length_m=tuple(
+            1e-3 * w for w in _list(cand.get("tube_length_mm", [49.5]), where("tube_length_mm"), float)
+        ),
+        results_dir=(path.parent / res.get("dir", "results")).resolve() if "dir" in res else Path("results"),
+        n_draws=n_draws,
+        source=path,
+    )
+
+
+def thickness_m(geometry: Geometry) -> float:
+    """Inflated thickness bound [m]: round tubes (half-angle pi/2) bulge both walls to 2 w / pi."""
+    return 2.0 * geometry.tube_width_m / math.pi
+
+
+def _geometry_checks(req: Requirement, g: Geometry) -> dict[str, float]:
+    """Requirement -> margin (fraction of the bound left; negative = violated) of the geometric requirements."""
+    margins = {}
+    for name, bound, value in (
+        ("width", req.max_width_m, g.tube_length_m),
+        ("length", req.max_length_m, g.flat_length_m),
+        ("thickness", req.max_thickness_m, thickness_m(g)),
+    ):
+        if bound is not None:
+            margins[name] = 1.0 - value / bound
+    return margins
+
+
+@functools.partial(jax.jit, static_argnames="config")
+def _static_forces(stacked, pressure_pa, strain, geometry, config):
+    return jax.vmap(lambda p: static_force(p, pressure_pa, strain, config=config, geometry=geometry))(stacked)
+
+
+def _force_draws(param_sets, config, reference: Geometry, target: Geometry, req: Requirement) -> np.ndarray:
+    """(n,) force [N] at the required contraction and maximum pressure for each parameter set."""
+    scaled = [scale_parameters(p, reference, target) for p in param_sets]
+    stacked = {k: jnp.asarray([p[k] for p in scaled]) for k in scaled[0]}
+    return np.asarray(_static_forces(stacked, req.max_pressure_pa, req.contraction, target, config))
+
+
+def evaluate_candidates(spec: Spec, materials: dict, *, log=print) -> list[dict]:
+    """Every candidate of ``spec`` over ``materials`` (code -> ``(idata, metrics or None)``), best first.
+
+    Each candidate: ``material``, ``n_tubes``, ``tube_width_mm``, ``tube_length_mm``, ``probability`` of
+    meeting every requirement, ``p_each`` (requirement -> probability it holds), ``margin`` (requirement ->
+    median fraction of the bound to spare; negative means violated), ``binding`` and ``force_median_n``."""
+    from .metrics import parameter_draws, result_config
+
+    req = spec.requirement
+    out = []
+    for code, (idata, metrics) in materials.items():
+        config = result_config(idata)
+        hysteresis = None
+        n_draws = spec.n_draws
+        if req.max_hysteresis is not None:
+            if metrics is None:
+                raise PeanoBayesInputError(
+                    f"material {code}: max_hysteresis needs its metrics.json; run 'peano-bayes metrics' first"
+                )
+            hysteresis = np.asarray(metrics["draws"]["hysteresis_loss"], float)
+            n_draws = len(hysteresis)  # the same evenly spaced posterior draws, so they pair by index
+        total = idata.posterior.sizes["chain"] * idata.posterior.sizes["draw"]
+        param_sets, _ = parameter_draws(idata, min(n_draws, total))
+        reference = _result_geometry(idata)
+        log(f"{code}: {len(param_sets)} posterior draws over the candidate geometries")
+        for n, w, length in itertools.product(spec.n_tubes, spec.tube_width_m, spec.tube_length_m):
+            target = Geometry(n_tubes=n, tube_width_m=w, tube_length_m=length)
+            force = _force_draws(param_sets, config, reference, target, req)
+            holds = {"force": np.isfinite(force) & (force >= req.force_n)}
+            margin = {"force": float(np.median(force) / req.force_n - 1.0)}
+            if hysteresis is not None:
+                h = hysteresis[: len(force)]
+                holds["hysteresis"] = np.isfinite(h) & (h <= req.max_hysteresis)
+                margin["hysteresis"] = float(1.0 - np.nanmedian(h) / req.max_hysteresis)
+            for name, m in _geometry_checks(req, target).items():
+                holds[name] = np.full(force.shape, m >= 0.0)
+                margin[name] = m
+            p_each = {name: float(np.mean(h)) for name, h in holds.items()}
+            joint = float(np.mean(np.all(np.stack(list(holds.values())), axis=0)))
+            binding = min(p_each, key=lambda k: (p_each[k], margin[k]))
+            out.append(
+                dict(
+                    material=code,
+                    n_tubes=n,
+                    tube_width_mm=1e3 * w,
+                    tube_length_mm=1e3 * length,
+                    probability=joint,
+                    p_each=p_each,
+                    margin=margin,
+                    binding=binding,
+                    force_median_n=float(np.median(force)),
+                )
+            )
+    out.sort(key=lambda c: (-c["probability"], -c["margin"]["force"]))
+    return out
+
+
+def _result_geometry(idata) -> Geometry:
+    """The geometry a result's data came from (its ``geometry`` attribute), else the paper's."""
+    import json
+
+    raw = idata.posterior.attrs.get("geometry")
+    if not raw:
+        return Geometry()
+    g = json.loads(raw)
+    return Geometry(n_tubes=int(g["n_tubes"]), tube_width_m=g["tube_width_m"], tube_length_m=g["tube_length_m"])
+
+
+def explain(candidate: dict, requirement: Requirement) -> str:
+    """One sentence on why a candidate ranks where it does."""
+    c = candidate
+    design = f"{c['material']} with {c['n_tubes']} tubes of {c['tube_width_mm']:g} x {c['tube_length_mm']:g} mm"
+    force = (
+        f"a median force of {c['force_median_n']:.1f} N at {100 * requirement.contraction:g} % contraction and "
+        f"{requirement.max_pressure_pa / 1e3:g} kPa against the {requirement.force_n:g} N asked"
+    )
+    binding = c["binding"]
+    return (
+        f"{design} meets every requirement with probability {c['probability']:.2f}, with {force}; "
+        f"the binding requirement is {binding} (P = {c['p_each'][binding]:.2f}, median margin "
+        f"{100 * c['margin'][binding]:+.0f} %)."
+    )
+
+
+def recommend(spec_path: str | Path, results_dir: str | Path | None = None, *, log=print) -> dict:
+    """Load a spec and the material results it names, score every candidate; returns ``requirement``,
+    ``candidates`` (best first, see :func:`evaluate_candidates`) and ``explanation`` of the top one."""
+    from .metrics import load_result
+
+    spec = load_spec(spec_path)
+    root = Path(results_dir) if results_dir is not None else spec.results_dir
+    codes = spec.materials or tuple(sorted(p.parent.name for p in root.glob("*/posterior.nc")))
+    if not codes:
+        raise PeanoBayesInputError(f"{root}: no material results (*/posterior.nc); run 'peano-bayes run' first")
+    materials = {}
+    for code in codes:
+        directory = root / code
+        if not (directory / "posterior.nc").exists():
+            raise PeanoBayesInputError(f"{directory}: no posterior.nc for material {code!r}")
+        metrics = None
+        if (directory / "metrics.json").exists():
+            from .metrics import read_metrics
+
+            metrics = read_metrics(directory)
+        materials[code] = (load_result(directory), metrics)
+    candidates = evaluate_candidates(spec, materials, log=log)
+    return {
+        "spec": str(spec.source),
+        "requirement": spec.requirement.__dict__,
+        "candidates": candidates,
+        "explanation": explain(candidates[0], spec.requirement),
+    }
+
+
+def recommendation_markdown(report: dict, top: int = 10) -> str:
+    """The ``top`` candidates as a markdown table, then the one-sentence explanation of the first."""
+    lines = [
+        "| rank | material | tubes | w [mm] | l [mm] | P(meets all) | median force [N] | binding |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for i, c in enumerate(report["candidates"][:top], 1):
+        lines.append(
+            f"| {i} | {c['material']} | {c['n_tubes']} | {c['tube_width_mm']:g} | {c['tube_length_mm']:g} | "
+            f"{c['probability']:.2f} | {c['force_median_n']:.1f} | {c['binding']} ({c['p_each'][c['binding']]:.2f}) |"
+        )
+    return "\n".join(lines + ["", report["explanation"]])
+
+
+__all__ = ["Requirement", "Spec", "evaluate_candidates", "explain", "load_spec", "recommend", "recommendation_markdown"]
