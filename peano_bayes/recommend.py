@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import functools
 import itertools
+import json
 import math
 import tomllib
 from dataclasses import dataclass
@@ -76,10 +77,11 @@ class Spec:
     source: Path
 
 
-def _number(value, where: str, *, positive: bool = True) -> float:
+def _number(value, where: str) -> float:
+    """``value`` as a positive finite float, else an error naming ``where``."""
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
         raise PeanoBayesInputError(f"{where}: expected a finite number, got {value!r}")
-    if positive and not value > 0:
+    if not value > 0:
         raise PeanoBayesInputError(f"{where}: expected a positive number, got {value!r}")
     return float(value)
 
@@ -200,11 +202,10 @@ def _static_forces(stacked, pressure_pa, strain, geometry, config):
     return jax.vmap(lambda p: static_force(p, pressure_pa, strain, config=config, geometry=geometry))(stacked)
 
 
-def _force_draws(param_sets, config, reference: Geometry, target: Geometry, req: Requirement) -> np.ndarray:
-    """(n,) force [N] at the required contraction and maximum pressure for each parameter set."""
-    scaled = [scale_parameters(p, reference, target) for p in param_sets]
-    stacked = {k: jnp.asarray([p[k] for p in scaled]) for k in scaled[0]}
-    return np.asarray(_static_forces(stacked, req.max_pressure_pa, req.contraction, target, config))
+def _force_draws(stacked: dict, config, reference: Geometry, target: Geometry, req: Requirement) -> np.ndarray:
+    """(n,) force [N] at the required contraction and maximum pressure; ``stacked``: name -> (n,) draws."""
+    scaled = scale_parameters(stacked, reference, target)
+    return np.asarray(_static_forces(scaled, req.max_pressure_pa, req.contraction, target, config))
 
 
 def evaluate_candidates(spec: Spec, materials: dict, *, log=print) -> list[dict]:
@@ -230,11 +231,12 @@ def evaluate_candidates(spec: Spec, materials: dict, *, log=print) -> list[dict]
             n_draws = len(hysteresis)  # the same evenly spaced posterior draws, so they pair by index
         total = idata.posterior.sizes["chain"] * idata.posterior.sizes["draw"]
         param_sets, _ = parameter_draws(idata, min(n_draws, total))
+        stacked = {k: jnp.asarray([p[k] for p in param_sets]) for k in param_sets[0]}
         reference = _result_geometry(idata)
         log(f"{code}: {len(param_sets)} posterior draws over the candidate geometries")
         for n, w, length in itertools.product(spec.n_tubes, spec.tube_width_m, spec.tube_length_m):
             target = Geometry(n_tubes=n, tube_width_m=w, tube_length_m=length)
-            force = _force_draws(param_sets, config, reference, target, req)
+            force = _force_draws(stacked, config, reference, target, req)
             holds = {"force": np.isfinite(force) & (force >= req.force_n)}
             margin = {"force": float(np.median(force) / req.force_n - 1.0)}
             if hysteresis is not None:
@@ -266,8 +268,6 @@ def evaluate_candidates(spec: Spec, materials: dict, *, log=print) -> list[dict]
 
 def _result_geometry(idata) -> Geometry:
     """The geometry a result's data came from (its ``geometry`` attribute), else the paper's."""
-    import json
-
     raw = idata.posterior.attrs.get("geometry")
     if not raw:
         return Geometry()
@@ -294,7 +294,7 @@ def explain(candidate: dict, requirement: Requirement) -> str:
 def recommend(spec_path: str | Path, results_dir: str | Path | None = None, *, log=print) -> dict:
     """Load a spec and the material results it names, score every candidate; returns ``requirement``,
     ``candidates`` (best first, see :func:`evaluate_candidates`) and ``explanation`` of the top one."""
-    from .metrics import load_result
+    from .metrics import load_result, read_metrics
 
     spec = load_spec(spec_path)
     root = Path(results_dir) if results_dir is not None else spec.results_dir
@@ -306,11 +306,7 @@ def recommend(spec_path: str | Path, results_dir: str | Path | None = None, *, l
         directory = root / code
         if not (directory / "posterior.nc").exists():
             raise PeanoBayesInputError(f"{directory}: no posterior.nc for material {code!r}")
-        metrics = None
-        if (directory / "metrics.json").exists():
-            from .metrics import read_metrics
-
-            metrics = read_metrics(directory)
+        metrics = read_metrics(directory) if (directory / "metrics.json").exists() else None
         materials[code] = (load_result(directory), metrics)
     candidates = evaluate_candidates(spec, materials, log=log)
     return {

@@ -60,7 +60,8 @@ def _scaling(name: str, across: float, along: float) -> float:
 
 
 def scale_parameters(params: dict, reference: Geometry, target: Geometry) -> dict:
-    """Parameters fitted on a ``reference`` muscle, carried to a ``target`` geometry of the same walls.
+    """Parameters (scalars, or arrays of draws) fitted on a ``reference`` muscle, carried to a ``target``
+    geometry of the same walls.
 
     Muscle-level stiffnesses [N/m] of the walls act in parallel across the tube length l and in series along
     the flat length L = n w, so they scale as l/L (``tensile_kb`` as l/L^2, its stretch being quadratic);
