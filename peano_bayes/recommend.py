@@ -161,6 +161,9 @@ def load_spec(path: str | Path) -> Spec:
     if not isinstance(res, dict):
         raise PeanoBayesInputError(f"{path}: [results] must be a table, got {res!r}")
     _unknown(res, ("dir", "n_draws"), f"{path} [results]")
+    results_dir = res.get("dir", "results")
+    if not isinstance(results_dir, str) or not results_dir:
+        raise PeanoBayesInputError(f"{path} [results] dir: expected a folder path (string), got {results_dir!r}")
     n_draws = res.get("n_draws", 100)
     if isinstance(n_draws, bool) or not isinstance(n_draws, int) or n_draws < 1:
         raise PeanoBayesInputError(f"{path} [results] n_draws: expected a whole number >= 1, got {n_draws!r}")
@@ -173,7 +176,7 @@ def load_spec(path: str | Path) -> Spec:
         tube_length_m=tuple(
             1e-3 * w for w in _list(cand.get("tube_length_mm", [49.5]), where("tube_length_mm"), float)
         ),
-        results_dir=(path.parent / res.get("dir", "results")).resolve() if "dir" in res else Path("results"),
+        results_dir=(path.parent / results_dir).resolve() if "dir" in res else Path(results_dir),
         n_draws=n_draws,
         source=path,
     )

@@ -67,6 +67,10 @@ def test_bad_candidates_are_refused(tmp_path):
         load_spec(_spec(tmp_path, GOOD, "n_tubes = [4, 0]"))
     with pytest.raises(PeanoBayesInputError, match="unknown key 'tube_widths_mm'"):
         load_spec(_spec(tmp_path, GOOD, "tube_widths_mm = [15]"))
+    bad_dir = tmp_path / "dir.toml"
+    bad_dir.write_text(f"[requirement]\n{GOOD}[results]\ndir = 5\n")
+    with pytest.raises(PeanoBayesInputError, match=r"dir.toml \[results\] dir: expected a folder path"):
+        load_spec(bad_dir)
 
 
 @pytest.fixture(scope="module")
