@@ -176,6 +176,9 @@ def _sampling_arguments(p):
     p.add_argument("--walkers", type=int, default=None, help="emcee walkers (default: max(32, 2 x parameters + 2))")
     p.add_argument("--chunk", type=int, default=500, help="steps between saved states and checks (default: 500)")
     p.add_argument("--max-steps", type=int, default=20_000, help="step limit; beyond it the run is unconverged")
+    p.add_argument(
+        "--warmup", type=int, default=300, help="warm-up steps, discarded, that fit the proposal (default: 300)"
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.add_argument(
         "--sample-all",
@@ -190,6 +193,8 @@ def _check_sampling(args):
     for name in ("starts", "chunk", "max_steps"):
         if getattr(args, name) < 1:
             raise PeanoBayesInputError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
+    if args.warmup < 0:
+        raise PeanoBayesInputError(f"--warmup must be >= 0, got {args.warmup}")
     if args.walkers is not None and args.walkers < 4:
         raise PeanoBayesInputError(f"--walkers must be >= 4, got {args.walkers}")
     return dict(
@@ -199,6 +204,7 @@ def _check_sampling(args):
         n_walkers=args.walkers,
         chunk=args.chunk,
         max_steps=args.max_steps,
+        warmup=args.warmup,
         progress=not args.no_progress,
         sample_all=args.sample_all,
     )

@@ -12,7 +12,15 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from peano_bayes.inference.sample import TARGETS, convergence, load_state, sample
+from peano_bayes.inference.sample import (
+    TARGETS,
+    IndependenceProposal,
+    convergence,
+    load_state,
+    proposal_at,
+    sample,
+    warmup_rounds,
+)
 
 
 @dataclass
@@ -53,10 +61,67 @@ def test_converges_on_a_gaussian_and_recovers_its_moments():
     np.testing.assert_allclose(np.cov(draws.T), g.cov, atol=0.1)
 
 
+def test_independence_move_alone_samples_the_target_despite_a_wrong_proposal():
+    """The Hastings factor is right: an MH chain whose only move is a proposal centred off the target and
+    with the wrong shape still has the target's mean and covariance (a sign error would bias both)."""
+    import emcee
+
+    g = Gaussian()
+    proposal = IndependenceProposal(g.mean + np.array([0.5, -0.3, 0.2]), np.diag([2.0, 1.5, 1.0]), df=5.0)
+    sampler = emcee.EnsembleSampler(8, 3, g.batched, vectorize=True, moves=[(emcee.moves.MHMove(proposal), 1.0)])
+    rng = np.random.RandomState(11)
+    start = emcee.State(rng.multivariate_normal(g.mean, g.cov, 8), random_state=rng.get_state())
+    sampler.run_mcmc(start, 6000, progress=False)
+    draws = sampler.get_chain(discard=200, flat=True)
+    tau = float(np.max(emcee.autocorr.integrated_time(sampler.get_chain(discard=200), tol=0)))
+    se = np.sqrt(np.diag(g.cov) * tau / draws.shape[0])
+    assert np.all(np.abs(draws.mean(axis=0) - g.mean) < 5 * se)
+    np.testing.assert_allclose(np.cov(draws.T), g.cov, atol=0.06)
+
+
+def test_proposal_log_density_matches_its_own_draws():
+    proposal = IndependenceProposal(np.array([1.0, 2.0]), np.array([[1.0, 0.3], [0.3, 0.5]]), df=4.0)
+    new, factor = proposal(np.zeros((4000, 2)), np.random.RandomState(0))
+    # Draws have the t's mean, and covariance df / (df - 2) times the scale matrix.
+    np.testing.assert_allclose(new.mean(axis=0), proposal.mean, atol=0.06)
+    np.testing.assert_allclose(np.cov(new.T), 2.0 * proposal.covariance, rtol=0.15, atol=0.05)
+    np.testing.assert_allclose(factor, proposal.log_density(np.zeros((4000, 2))) - proposal.log_density(new))
+
+
+def test_warmup_rounds_and_the_proposal_in_force():
+    assert warmup_rounds(0) == [0]
+    assert warmup_rounds(300) == [0, 100, 200, 300]
+    assert warmup_rounds(10) == [0, 4, 8, 10]
+    chain = np.random.default_rng(0).normal(size=(300, 8, 2))
+    assert proposal_at(chain, 99, 300) is None
+    p = proposal_at(chain, 250, 300)  # fitted to steps 150-199 of round two
+    np.testing.assert_allclose(p.mean, chain[150:200].reshape(-1, 2).mean(axis=0))
+    later = proposal_at(chain, 5000, 300)  # frozen after the warm-up: the last round's second half
+    np.testing.assert_allclose(later.mean, chain[250:300].reshape(-1, 2).mean(axis=0))
+
+
+def test_a_step_limit_inside_the_warmup_says_so():
+    g = Gaussian()
+    result = sample(g, g.mean, 0.01 * np.eye(3), n_walkers=8, seed=0, warmup=300, max_steps=100, progress=False,
+                    log=lambda m: None)
+    assert result.chain.shape == (100, 8, 3)
+    assert not result.convergence.converged
+    assert "inside the warm-up" in result.convergence.problems[0]
+
+
 def test_step_limit_gives_an_unconverged_result_that_says_why():
     g = Gaussian()
     result = sample(
-        g, g.mean, 0.01 * np.eye(3), n_walkers=8, seed=0, chunk=50, max_steps=100, progress=False, log=lambda m: None
+        g,
+        g.mean,
+        0.01 * np.eye(3),
+        n_walkers=8,
+        seed=0,
+        chunk=50,
+        warmup=30,
+        max_steps=100,
+        progress=False,
+        log=lambda m: None,
     )
     assert result.chain.shape == (100, 8, 3)
     assert not result.convergence.converged
@@ -65,7 +130,7 @@ def test_step_limit_gives_an_unconverged_result_that_says_why():
 
 def test_resume_continues_bit_identically(tmp_path):
     g = Gaussian()
-    kw = dict(n_walkers=8, seed=7, chunk=40, progress=False, log=lambda m: None)
+    kw = dict(n_walkers=8, seed=7, chunk=40, warmup=30, progress=False, log=lambda m: None)
     whole = sample(g, g.mean, 0.05 * np.eye(3), max_steps=120, **kw)
     state = tmp_path / "state.npz"
     first = sample(g, g.mean, 0.05 * np.eye(3), max_steps=80, state_path=state, **kw)
@@ -120,6 +185,8 @@ def test_killed_fit_resumes_without_losing_a_chunk(tmp_path):
         "40",
         "--max-steps",
         "240",
+        "--warmup",
+        "120",  # three rounds of 40: every saved state is at a multiple of --chunk
         "--no-progress",
         "--seed",
         "4",
