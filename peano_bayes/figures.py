@@ -13,18 +13,14 @@ import json
 import os
 from pathlib import Path
 
-import matplotlib
+import arviz as az
+import matplotlib.pyplot as plt
 import matplotlib.ticker
+import numpy as np
 
-matplotlib.use("Agg")
-
-import arviz as az  # noqa: E402
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from . import plots  # noqa: E402
-from .inference.likelihood import NOISE_PARAMETERS  # noqa: E402
-from .metrics import METRIC_UNITS  # noqa: E402
+from . import plots
+from .inference.likelihood import NOISE_PARAMETERS
+from .metrics import METRIC_UNITS
 
 QUANTILES = (0.03, 0.5, 0.97)
 SIGNAL_LABEL = {"load_cycle": "force [N]", "blocking": "force [N]", "stroke": "strain [-]", "step": "strain [-]"}

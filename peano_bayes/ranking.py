@@ -180,13 +180,13 @@ def ranking_markdown(report: dict) -> str:
     lines.append("| criterion | " + " | ".join(materials) + " |")
     lines.append("|---|" + "---|" * len(materials))
     for criterion, r in report["criteria"].items():
-        better = "lower" if CRITERIA[criterion] < 0 else "higher"
-        better += ", prior only: not fitted" if r.get("from_prior") else ""
+        label = f"{criterion} ({'lower' if CRITERIA[criterion] < 0 else 'higher'} is better)"
+        label += " (prior only: not fitted)" if r.get("from_prior") else ""
         cells = []
         for c in materials:
             low, high = r["rank_interval"][c]
             cells.append(f"{r['p_best'][c]:.2f}, rank {r['mean_rank'][c]:.1f} ({low}-{high})")
-        lines.append(f"| {criterion} ({better} is better) | " + " | ".join(cells) + " |")
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
     if report["pareto"]:
         lines += ["", f"### P(Pareto-optimal) over {', '.join(PARETO_CRITERIA)}", ""]
         lines.append("| " + " | ".join(materials) + " |")

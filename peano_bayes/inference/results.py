@@ -159,7 +159,8 @@ def write_netcdf(idata, path: Path) -> None:
 
 
 def parameter_table(idata, names, hdi_prob: float = 0.94) -> dict:
-    """name -> mean, sd, HDI bounds, R-hat and bulk ESS of the stored posterior (arviz)."""
+    """name -> mean, sd and HDI bounds of the stored posterior (arviz); convergence figures are in
+    :class:`~peano_bayes.inference.sample.Convergence`."""
     table = az.summary(idata, var_names=list(names), hdi_prob=hdi_prob, round_to="none")
     low, high = (c for c in table.columns if c.startswith("hdi_"))
     return {
