@@ -69,7 +69,9 @@ def posterior_mode(
     """
     t0 = time.perf_counter()
     start = np.asarray(start, dtype=float)
-    value_and_grad = jax.jit(jax.value_and_grad(lambda theta: -posterior.log_prob(theta)))
+    value_and_grad = getattr(posterior, "value_and_grad", None)  # a Posterior's is compiled once per protocol
+    if value_and_grad is None:
+        value_and_grad = jax.jit(jax.value_and_grad(lambda theta: -posterior.log_prob(theta)))
 
     def objective(x):
         value, grad = value_and_grad(jnp.asarray(x))

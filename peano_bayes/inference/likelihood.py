@@ -126,6 +126,26 @@ class RunGroup:
         return self.specimen_index[self.shared]
 
 
+# A pytree (arrays as leaves, ``test`` and ``keys`` as structure): groups can be jit arguments, so one compiled
+# log posterior serves every dataset of the same protocol (see :meth:`Posterior.with_observations`).
+jax.tree_util.register_dataclass(
+    RunGroup,
+    data_fields=[
+        "specimen_index",
+        "time_s",
+        "strain",
+        "pressure_pa",
+        "supply_pa",
+        "load_n",
+        "observed",
+        "counts",
+        "shared",
+        "bin_time_s",
+    ],
+    meta_fields=["test", "keys"],
+)
+
+
 @dataclass(frozen=True, eq=False)
 class Observations:
     """A dataset reduced for the likelihood: run groups and the specimen names they index."""

@@ -12,9 +12,9 @@ test) are held at their nominal values instead of being sampled from their prior
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from dataclasses import dataclass
-from functools import cached_property
+from dataclasses import dataclass, field
 
 import jax
 import jax.numpy as jnp
@@ -66,6 +66,8 @@ class Posterior:
     config: ModelConfig
     fixed: dict
     family: str = "gaussian"
+    # Compiled functions, shared (by reference) with every posterior made by :meth:`with_observations`.
+    _compiled: dict = field(default_factory=dict, repr=False)
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -114,12 +116,55 @@ class Posterior:
             [p[np.isfinite(g.observed)] for p, g in zip(parts, self.observations.groups, strict=True)]
         )
 
-    def log_prob(self, theta):
-        """ln p(theta | data) up to a constant; ``-inf``, never NaN, for any theta."""
+    def log_prob(self, theta, groups=None):
+        """ln p(theta | data) up to a constant; ``-inf``, never NaN, for any theta. ``groups`` (default this
+        posterior's) may be traced: unmeasured bins contribute 0, so no data-dependent masking is needed."""
+        observations = self.observations
+        if groups is not None:
+            observations = dataclasses.replace(observations, groups=tuple(groups))
         lp = self.log_prior(theta)
-        ll = jnp.sum(self.pointwise(theta))
+        parts = pointwise_log_likelihood(self.params(theta), observations, config=self.config, family=self.family)
+        ll = sum(jnp.sum(p) for p in parts)
         total = jnp.where(jnp.isfinite(lp), lp + ll, -jnp.inf)
         return jnp.where(jnp.isnan(total), -jnp.inf, total)
+
+    def _shared(self, name: str, build):
+        """The compiled function ``name`` of this posterior's family, compiled on first use; it takes the run
+        groups as its last argument."""
+        if name not in self._compiled:
+            self._compiled[name] = build()
+        return self._compiled[name]
+
+    @property
+    def batched(self):
+        """``f(thetas (n, D)) -> (n,)`` numpy log posterior, jit+vmap (one compilation per batch size, shared
+        with every posterior from :meth:`with_observations`)."""
+        f = self._shared("batched", lambda: jax.jit(jax.vmap(self.log_prob, in_axes=(0, None))))
+        groups = self.observations.groups
+
+        def call(thetas):
+            return np.asarray(f(jnp.asarray(thetas, dtype=jnp.float64), groups))
+
+        return call
+
+    @property
+    def value_and_grad(self):
+        """``f(theta (D,)) -> (-ln p, gradient)`` of the negative log posterior, compiled once per family."""
+        f = self._shared("value_and_grad", lambda: jax.jit(jax.value_and_grad(lambda t, g: -self.log_prob(t, g))))
+        groups = self.observations.groups
+        return lambda theta: f(jnp.asarray(theta, dtype=jnp.float64), groups)
+
+    def with_observations(self, observations: Observations) -> Posterior:
+        """This posterior on other data of the same protocol (same tests, specimens, run keys and bin counts):
+        it reuses the compiled functions, so a study over many simulated datasets compiles once."""
+        mine = jax.tree_util.tree_structure(self.observations.groups)
+        theirs = jax.tree_util.tree_structure(observations.groups)
+        shapes = lambda o: [np.shape(x) for x in jax.tree_util.tree_leaves(o.groups)]  # noqa: E731
+        if mine != theirs or shapes(self.observations) != shapes(observations) or (
+            self.observations.specimens != observations.specimens
+        ):
+            raise ValueError("with_observations needs data of the same protocol: tests, specimens, runs and bins")
+        return dataclasses.replace(self, observations=observations)
 
     def observed(self) -> dict[str, np.ndarray]:
         """The measured bins, in :meth:`pointwise` order: ``value``, ``test``, ``specimen``, ``run``,
@@ -138,16 +183,6 @@ class Posterior:
                 cols["run"] += [int(key[2])] * n
                 cols["unit"] += ["N" if OBSERVED[g.test][0] == "force_n" else "-"] * n
         return {k: (np.concatenate(v) if k in ("value", "time_s", "count") else np.asarray(v)) for k, v in cols.items()}
-
-    @cached_property
-    def batched(self):
-        """``f(thetas (n, D)) -> (n,)`` numpy log posterior, jit+vmap (one compilation per batch size)."""
-        f = jax.jit(jax.vmap(self.log_prob))
-
-        def call(thetas):
-            return np.asarray(f(jnp.asarray(thetas, dtype=jnp.float64)))
-
-        return call
 
 
 def build_posterior(
