@@ -242,10 +242,14 @@ def _fmt(x: float) -> str:
     return f"{x:.3g}" if math.isfinite(x) else str(x)
 
 
-def index_markdown(summaries: list[dict], metrics: dict | None = None, ranking: dict | None = None) -> str:
+def index_markdown(
+    summaries: list[dict], metrics: dict | None = None, ranking: dict | None = None, references: dict | None = None
+) -> str:
     """``results/index.md``: per material, a parameter table with 94 % intervals, fit quality, convergence,
-    and (given ``metrics``: code -> metrics.json) the Table 3 metrics against the paper with links to the
-    figures; then (given ``ranking``, :func:`~peano_bayes.ranking.rank_materials`) the cross-material ranking."""
+    (given ``references``: code -> reference_models.json) the load-cycle fit against the paper's reference
+    models, and (given ``metrics``: code -> metrics.json) the Table 3 metrics against the paper with links to
+    the figures; then (given ``ranking``, :func:`~peano_bayes.ranking.rank_materials`) the cross-material
+    ranking."""
     from .metrics import metrics_markdown
     from .ranking import ranking_markdown
 
@@ -276,6 +280,22 @@ def index_markdown(summaries: list[dict], metrics: dict | None = None, ranking: 
             lines.append(
                 f"| {test} | {_fmt(q['rmse'])} {q['unit']} | {_fmt(q['max_error'])} {q['unit']} | {q['r2']:.4f} |"
             )
+        reference = (references or {}).get(s["material"])
+        ours = s["fit_quality_posterior_mean"].get("load_cycle")
+        if reference and ours:
+            lines += [
+                "",
+                "Load cycles against the paper's reference models fitted to the same bins "
+                "(`inference/reference_fit.py`):",
+                "",
+                "| model | RMSE | max error | R² |",
+                "|---|---|---|---|",
+                f"| peano_bayes (posterior mean) | {_fmt(ours['rmse'])} N | {_fmt(ours['max_error'])} N | "
+                f"{ours['r2']:.4f} |",
+            ]
+            for name, label in (("sarosi", "Sarosi static, 12 coefficients"), ("veale", "Veale force balance")):
+                q = reference[name]["quality"]
+                lines.append(f"| {label} | {_fmt(q['rmse'])} N | {_fmt(q['max_error'])} N | {q['r2']:.4f} |")
         t = s["timings_s"]
         lines += [
             "",
@@ -309,6 +329,24 @@ def index_markdown(summaries: list[dict], metrics: dict | None = None, ranking: 
     return "\n".join(lines)
 
 
+def reference_models(directory: Path, summary: dict, *, log=print) -> dict | None:
+    """``directory/reference_models.json``: the paper's reference models fitted to the load cycles of the
+    result's dataset (:func:`~peano_bayes.inference.reference_fit.reference_comparison`), made if missing;
+    ``None`` when the dataset has no load cycles or is no longer where the summary says."""
+    from .inference.reference_fit import reference_comparison
+
+    path = directory / "reference_models.json"
+    if path.exists():
+        return json.loads(path.read_text())
+    source = Path(summary["dataset"])
+    if "load_cycle" not in summary["tests"] or not source.exists():
+        return None
+    log(f"{summary['material']}: fitting the reference models to the load cycles ...")
+    comparison = reference_comparison(prepare(_select_tests(load(source), ["load_cycle"])))
+    write_atomic_text(path, json.dumps(comparison, indent=1))
+    return comparison
+
+
 def report_results(out_dir: str | Path, materials=BUNDLED_MATERIALS, *, n_draws: int = 100, log=print) -> dict:
     """Metrics, figures, ranking and ``index.md`` for the finished materials of ``out_dir``.
 
@@ -321,10 +359,11 @@ def report_results(out_dir: str | Path, materials=BUNDLED_MATERIALS, *, n_draws:
 
     out_dir = Path(out_dir)
     finished = [c for c in materials if (out_dir / c / "summary.json").exists()]
-    summaries, metrics, results = [], {}, {}
+    summaries, metrics, results, references = [], {}, {}, {}
     for code in finished:
         directory = out_dir / code
         summaries.append(json.loads((directory / "summary.json").read_text()))
+        references[code] = reference_models(directory, summaries[-1], log=log)
         if not (directory / "metrics.json").exists():
             log(f"{code}: Table 3 metrics from {n_draws} posterior draws ...")
             evaluate_result(directory, n_draws=n_draws, progress=False)
@@ -339,7 +378,7 @@ def report_results(out_dir: str | Path, materials=BUNDLED_MATERIALS, *, n_draws:
         write_atomic_text(out_dir / "ranking.json", json.dumps(ranking, indent=1))
         write_atomic_text(out_dir / "ranking.md", "# Ranking\n\n" + ranking_markdown(ranking) + "\n")
         cross_material_figures(out_dir, results, metrics, ranking)
-    write_atomic_text(out_dir / "index.md", index_markdown(summaries, metrics, ranking))
+    write_atomic_text(out_dir / "index.md", index_markdown(summaries, metrics, ranking, references))
     log(f"wrote {out_dir / 'index.md'}")
     return ranking or {}
 
@@ -399,6 +438,7 @@ __all__ = [
     "index_markdown",
     "infer",
     "least_squares",
+    "reference_models",
     "report_results",
     "run_bundled",
     "walker_start",

@@ -241,3 +241,7 @@ def test_killed_fit_resumes_without_losing_a_chunk(tmp_path):
         assert f"({link})" in index and (out / link).exists(), link
     assert "## Ranking across materials" in index and ranking["materials"] == ["TP"]
     assert (out / "TP" / "metrics.json").exists() and (out / "ranking.json").exists()
+    # The fit report puts the paper's reference models, fitted to the same load cycles, beside ours.
+    reference = json.loads((out / "TP" / "reference_models.json").read_text())
+    assert "| Sarosi static, 12 coefficients |" in index and "| Veale force balance |" in index
+    assert all(0.0 < reference[m]["quality"]["rmse"] < 50.0 for m in ("sarosi", "veale"))
