@@ -91,7 +91,8 @@ class IndependenceProposal:
         return new, self.log_density(coords) - self.log_density(new)
 
 
-def _moves(proposal: IndependenceProposal | None) -> list:
+def moves_for(proposal: IndependenceProposal | None) -> list:
+    """emcee's weighted moves: :data:`MOVES` without a proposal, else :data:`ADAPTED_MOVES` with it."""
     if proposal is None:
         return [(m(), w) for m, w in MOVES]
     de, snooker, independence = ADAPTED_MOVES
@@ -312,7 +313,7 @@ def sample(
         in_warmup = done < warmup
         n = min(next(b for b in bounds if b > done) - done if in_warmup else chunk, max_steps - done)
         proposal = proposal_at(chain, done, warmup)
-        sampler = emcee.EnsembleSampler(n_walkers, ndim, posterior.batched, vectorize=True, moves=_moves(proposal))
+        sampler = emcee.EnsembleSampler(n_walkers, ndim, posterior.batched, vectorize=True, moves=moves_for(proposal))
         t0 = time.perf_counter()
         label = "warm-up" if in_warmup else "steps"
         state = sampler.run_mcmc(state, n, progress=progress, progress_kwargs={"desc": f"{label} {done}-{done + n}"})
@@ -362,6 +363,7 @@ __all__ = [
     "convergence",
     "initial_walkers",
     "load_state",
+    "moves_for",
     "proposal_at",
     "sample",
     "walker_count",
