@@ -9,17 +9,21 @@ metrics against the paper's values) and ``ranking`` (P(best) per criterion).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 from pathlib import Path
 
 import arviz as az
+import equinox as eqx
+import jax
+import jax.numpy as jnp
 import matplotlib.pyplot as plt
 import matplotlib.ticker
 import numpy as np
 
 from . import plots
-from .inference.likelihood import NOISE_PARAMETERS
+from .inference.likelihood import NOISE_PARAMETERS, predict, prepare
 from .metrics import METRIC_UNITS
 
 QUANTILES = (0.03, 0.5, 0.97)
@@ -78,14 +82,72 @@ def predictive_runs(idata) -> list[dict]:
     return out
 
 
-def material_figures(result_dir: str | Path) -> list[Path]:
-    """``predictive`` and ``corner`` figures of one result directory into its ``figures/``."""
+@eqx.filter_jit
+def _step_strain(stack: dict, group, config, geometry):
+    return jax.vmap(lambda p: predict(p, group, config=config, geometry=geometry)[0])(stack)
+
+
+def step_band(idata, dataset, n_draws: int = 40) -> dict | None:
+    """The first step run of ``dataset`` (a :class:`~peano_bayes.data.Dataset`) against the model's strain
+    over ``n_draws`` posterior draws: ``time_s``, ``observed``, ``low``, ``median``, ``high`` (94 % of the
+    draws, noise-free), ``title`` and ``prior_only`` (parameters drawn from the prior because the fit had no
+    step test). ``None`` when the dataset has no step run."""
+    from .metrics import parameter_draws, result_config
+
+    runs = [r for r in dataset.runs if r.test == "step"]
+    if not runs:
+        return None
+    run = runs[0]
+    observations = prepare(dataclasses.replace(dataset, runs=(run,)))
+    group = observations.groups[0]
+    sets, prior_only = parameter_draws(idata, n_draws)
+    stack = {k: jnp.asarray([s[k] for s in sets]) for k in sets[0]}
+    strain = np.asarray(_step_strain(stack, group, result_config(idata), observations.geometry))[:, 0, :]
+    finite = np.all(np.isfinite(strain), axis=1)
+    low, median, high = np.quantile(strain[finite], QUANTILES, axis=0)
+    return dict(
+        time_s=np.asarray(group.bin_time_s[0]),
+        observed=np.asarray(group.observed[0]),
+        low=low,
+        median=median,
+        high=high,
+        title=f"step response: specimen {run.specimen}, run {run.run}",
+        prior_only=prior_only,
+        n_draws=int(finite.sum()),
+    )
+
+
+def material_figures(result_dir: str | Path, dataset=None) -> list[Path]:
+    """``predictive`` and ``corner`` figures of one result directory into its ``figures/``; given its
+    ``dataset`` with a step run, also ``step`` (:func:`step_band`)."""
     from .metrics import load_result
 
     result_dir = Path(result_dir)
     idata = load_result(result_dir)
     code = idata.posterior.attrs["material"]
     written = []
+    band = step_band(idata, dataset) if dataset is not None else None
+    if band is not None:
+        with plt.rc_context(plots.STYLE):
+            fig, ax = plt.subplots(figsize=(5.0, 3.0))
+            source = "posterior"
+            if band["prior_only"]:
+                source += "; inlet and damping from the prior (no step fit)"
+            plots.predictive_band(
+                ax,
+                band["time_s"],
+                band["observed"],
+                band["low"],
+                band["median"],
+                band["high"],
+                ylabel="strain [-]",
+                title=band["title"],
+                label_band=f"94 % of {band['n_draws']} model draws",
+                label_median="model median",
+            )
+            ax.legend(loc="lower right", frameon=False)
+            fig.suptitle(f"{code}: step response against the model ({source})", fontsize=9)
+            written += save(fig, result_dir / "figures" / "step")
     panels = predictive_runs(idata)
     with plt.rc_context(plots.STYLE):
         fig, axes = plt.subplots(1, len(panels), figsize=(3.2 * len(panels), 2.8), squeeze=False)

@@ -243,7 +243,11 @@ def _fmt(x: float) -> str:
 
 
 def index_markdown(
-    summaries: list[dict], metrics: dict | None = None, ranking: dict | None = None, references: dict | None = None
+    summaries: list[dict],
+    metrics: dict | None = None,
+    ranking: dict | None = None,
+    references: dict | None = None,
+    step_figures: dict | None = None,
 ) -> str:
     """``results/index.md``: per material, a parameter table with 94 % intervals, fit quality, convergence,
     (given ``references``: code -> reference_models.json) the load-cycle fit against the paper's reference
@@ -313,7 +317,12 @@ def index_markdown(
                 metrics_markdown(code, m["summary"], m["published"]),
                 "",
                 f"Figures: [data over the predictive band]({code}/figures/predictive.png), "
-                f"[corner plot]({code}/figures/corner.png).",
+                f"[corner plot]({code}/figures/corner.png)"
+                + (
+                    f", [step response against the model]({code}/figures/step.png)."
+                    if (step_figures or {}).get(code)
+                    else "."
+                ),
                 "",
             ]
     if ranking and ranking.get("criteria"):
@@ -369,7 +378,8 @@ def report_results(out_dir: str | Path, materials=BUNDLED_MATERIALS, *, n_draws:
             evaluate_result(directory, n_draws=n_draws, progress=False)
         metrics[code] = read_metrics(directory)
         if not (directory / "figures" / "corner.png").exists():
-            material_figures(directory)
+            source = Path(summaries[-1]["dataset"])
+            material_figures(directory, load(source) if source.exists() else None)
             log(f"{code}: figures in {directory / 'figures'}")
         results[code] = load_result(directory)
     prior_only = {name for m in metrics.values() for name, s in m["summary"].items() if s["from_prior"]}
@@ -378,7 +388,8 @@ def report_results(out_dir: str | Path, materials=BUNDLED_MATERIALS, *, n_draws:
         write_atomic_text(out_dir / "ranking.json", json.dumps(ranking, indent=1))
         write_atomic_text(out_dir / "ranking.md", "# Ranking\n\n" + ranking_markdown(ranking) + "\n")
         cross_material_figures(out_dir, results, metrics, ranking)
-    write_atomic_text(out_dir / "index.md", index_markdown(summaries, metrics, ranking, references))
+    steps = {c: (out_dir / c / "figures" / "step.png").exists() for c in finished}
+    write_atomic_text(out_dir / "index.md", index_markdown(summaries, metrics, ranking, references, steps))
     log(f"wrote {out_dir / 'index.md'}")
     return ranking or {}
 

@@ -27,11 +27,24 @@ MODEL_COLOUR = "#1f77b4"
 PUBLISHED_COLOUR = "#d62728"
 
 
-def predictive_band(ax, time_s, observed, low, median, high, *, ylabel: str, title: str = "", label_data="data"):
+def predictive_band(
+    ax,
+    time_s,
+    observed,
+    low,
+    median,
+    high,
+    *,
+    ylabel: str,
+    title: str = "",
+    label_data="data",
+    label_band="94 % predictive interval",
+    label_median="predictive median",
+):
     """Observed bin means (points) over the posterior predictive median (line) and its interval (band), for
     one run; all arrays (n,) against ``time_s`` [s]."""
-    ax.fill_between(time_s, low, high, color=MODEL_COLOUR, alpha=0.3, lw=0, label="94 % predictive interval")
-    ax.plot(time_s, median, color=MODEL_COLOUR, lw=1.0, label="predictive median")
+    ax.fill_between(time_s, low, high, color=MODEL_COLOUR, alpha=0.3, lw=0, label=label_band)
+    ax.plot(time_s, median, color=MODEL_COLOUR, lw=1.0, label=label_median)
     ax.plot(time_s, observed, ".", color=DATA_COLOUR, ms=1.5, label=label_data)
     ax.set_xlabel("time [s]")
     ax.set_ylabel(ylabel)

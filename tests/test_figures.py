@@ -1,6 +1,7 @@
 """Figures: plot functions draw what they are given with unit-carrying labels; the figure builders write PNG
 and PDF for a real result (the shared recovery fit) and across materials."""
 
+import dataclasses
 import re
 
 import matplotlib
@@ -98,3 +99,22 @@ def test_material_and_cross_material_figures_are_written(result_dir, tmp_path):
 @pytest.mark.parametrize("builder", [forest_data, published_data])
 def test_builders_of_nothing_give_nothing(builder):
     assert builder({}) == {}
+
+
+@pytest.mark.slow
+def test_step_band_brackets_its_median_and_draws_a_figure(result_dir, tmp_path):
+    from peano_bayes.figures import step_band
+    from peano_bayes.rig import simulate_dataset
+
+    from .helpers import recovery_truth
+
+    dataset = simulate_dataset("TP", recovery_truth(), seed=3, specimens=1, repeats=1, tests=("step",))
+    band = step_band(load_result(result_dir), dataset, n_draws=6)
+    assert band["n_draws"] == 6 and band["time_s"].shape == band["observed"].shape == band["median"].shape
+    assert np.all(band["low"] <= band["median"]) and np.all(band["median"] <= band["high"])
+    # The step-only parameters (inlet, damping) were not fitted: drawn from the prior, and said so.
+    assert "orifice_area_m2" in band["prior_only"]
+    # The muscle contracts after the step, in the data and in the model.
+    assert band["observed"][-20:].mean() > band["observed"][:5].mean() + 0.01
+    assert band["median"][-20:].mean() > band["median"][:5].mean() + 0.01
+    assert step_band(load_result(result_dir), dataclasses.replace(dataset, runs=())) is None
