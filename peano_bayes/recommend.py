@@ -12,6 +12,11 @@ requirement at once, over joint posterior draws of its material:
   material's parameters carried to the candidate geometry by :func:`~peano_bayes.physics.scale_parameters`;
 - hysteresis loss: the material's posterior predictive Table 3 hysteresis (``metrics.json``; paired with the
   force by draw). Hysteresis is a ratio of energies and is taken as independent of geometry (an assumption);
+- response time (``max_response_time_s``): the time to the required contraction at the material's posterior
+  predictive Table 3 step speed, ``contraction x l0 / speed`` with the l0 of the paper's protocol: the tubes
+  contract together, so the strain rate, not the end speed, is taken as independent of the tube count (an
+  assumption), under the paper's step load. When the fit had no step test the inlet and damping come from
+  their prior, so this requirement is scored on prior knowledge, and the report says so;
 - width, length, thickness: geometry alone. Thickness is the fully inflated bound 2 w / pi of round tubes.
 
 Candidates are ranked by that probability, then by the force margin; each carries the median margin of every
@@ -44,6 +49,7 @@ _REQUIREMENT_KEYS = {
     "max_length_mm": "maximum flat muscle length n w [mm]",
     "max_thickness_mm": "maximum inflated thickness [mm]",
     "max_hysteresis": "maximum hysteresis loss [-]",
+    "max_response_time_s": "maximum time to the required contraction after a pressure step [s]",
 }
 _REQUIRED = ("force_n", "contraction", "max_pressure_kpa")
 _CANDIDATE_KEYS = ("materials", "n_tubes", "tube_width_mm", "tube_length_mm")
@@ -61,6 +67,7 @@ class Requirement:
     max_length_m: float | None = None
     max_thickness_m: float | None = None
     max_hysteresis: float | None = None
+    max_response_time_s: float | None = None
 
 
 @dataclass(frozen=True)
@@ -143,6 +150,7 @@ def load_spec(path: str | Path) -> Spec:
     hysteresis = req.get("max_hysteresis")
     if hysteresis is not None and not 0.0 < _number(hysteresis, at("max_hysteresis")) <= 1.0:
         raise PeanoBayesInputError(f"{at('max_hysteresis')}: expected a fraction in (0, 1], got {hysteresis!r}")
+    response = req.get("max_response_time_s")
     mm = lambda key: None if key not in req else 1e-3 * _number(req[key], at(key))  # noqa: E731
     requirement = Requirement(
         force_n=_number(req["force_n"], at("force_n")),
@@ -152,6 +160,7 @@ def load_spec(path: str | Path) -> Spec:
         max_length_m=mm("max_length_mm"),
         max_thickness_m=mm("max_thickness_mm"),
         max_hysteresis=None if hysteresis is None else float(hysteresis),
+        max_response_time_s=None if response is None else _number(response, at("max_response_time_s")),
     )
     cand = raw.get("candidates", {})
     if not isinstance(cand, dict):
@@ -223,15 +232,20 @@ def evaluate_candidates(spec: Spec, materials: dict, *, log=print) -> list[dict]
     out = []
     for code, (idata, metrics) in materials.items():
         config = result_config(idata)
-        hysteresis = None
+        paired = {}  # requirement -> (n,) metric draws, paired with the force draws by index
         n_draws = spec.n_draws
-        if req.max_hysteresis is not None:
+        for name, needed, metric in (
+            ("hysteresis", req.max_hysteresis, "hysteresis_loss"),
+            ("response_time", req.max_response_time_s, "speed"),
+        ):
+            if needed is None:
+                continue
             if metrics is None:
                 raise PeanoBayesInputError(
-                    f"material {code}: max_hysteresis needs its metrics.json; run 'peano-bayes metrics' first"
+                    f"material {code}: {name} needs its metrics.json; run 'peano-bayes metrics' first"
                 )
-            hysteresis = np.asarray(metrics["draws"]["hysteresis_loss"], float)
-            n_draws = len(hysteresis)  # the same evenly spaced posterior draws, so they pair by index
+            paired[name] = np.asarray(metrics["draws"][metric], float)
+            n_draws = len(paired[name])  # the same evenly spaced posterior draws, so they pair by index
         total = idata.posterior.sizes["chain"] * idata.posterior.sizes["draw"]
         param_sets, _ = parameter_draws(idata, min(n_draws, total))
         stacked = {k: jnp.asarray([p[k] for p in param_sets]) for k in param_sets[0]}
@@ -242,10 +256,14 @@ def evaluate_candidates(spec: Spec, materials: dict, *, log=print) -> list[dict]
             force = _force_draws(stacked, config, reference, target, req)
             holds = {"force": np.isfinite(force) & (force >= req.force_n)}
             margin = {"force": float(np.median(force) / req.force_n - 1.0)}
-            if hysteresis is not None:
-                h = hysteresis[: len(force)]
+            if "hysteresis" in paired:
+                h = paired["hysteresis"][: len(force)]
                 holds["hysteresis"] = np.isfinite(h) & (h <= req.max_hysteresis)
                 margin["hysteresis"] = float(1.0 - np.nanmedian(h) / req.max_hysteresis)
+            if "response_time" in paired:
+                t = req.contraction * float(reference.flat_length_m) / paired["response_time"][: len(force)]
+                holds["response_time"] = np.isfinite(t) & (t <= req.max_response_time_s)
+                margin["response_time"] = float(1.0 - np.nanmedian(t) / req.max_response_time_s)
             for name, m in _geometry_checks(req, target).items():
                 holds[name] = np.full(force.shape, m >= 0.0)
                 margin[name] = m
@@ -312,11 +330,20 @@ def recommend(spec_path: str | Path, results_dir: str | Path | None = None, *, l
         metrics = read_metrics(directory) if (directory / "metrics.json").exists() else None
         materials[code] = (load_result(directory), metrics)
     candidates = evaluate_candidates(spec, materials, log=log)
+    notes = []
+    if spec.requirement.max_response_time_s is not None:
+        prior_based = [c for c, (_, m) in materials.items() if m and m["summary"]["speed"]["from_prior"]]
+        if prior_based:
+            notes.append(
+                f"response time of {', '.join(prior_based)} rests on the prior of the inlet and damping "
+                "parameters: their fits had no step test"
+            )
     return {
         "spec": str(spec.source),
         "requirement": spec.requirement.__dict__,
         "candidates": candidates,
         "explanation": explain(candidates[0], spec.requirement),
+        "notes": notes,
     }
 
 
@@ -331,7 +358,8 @@ def recommendation_markdown(report: dict, top: int = 10) -> str:
             f"| {i} | {c['material']} | {c['n_tubes']} | {c['tube_width_mm']:g} | {c['tube_length_mm']:g} | "
             f"{c['probability']:.2f} | {c['force_median_n']:.1f} | {c['binding']} ({c['p_each'][c['binding']]:.2f}) |"
         )
-    return "\n".join(lines + ["", report["explanation"]])
+    notes = [f"Note: {n}." for n in report.get("notes", [])]
+    return "\n".join(lines + ["", report["explanation"], *([""] + notes if notes else [])])
 
 
 __all__ = ["Requirement", "Spec", "evaluate_candidates", "explain", "load_spec", "recommend", "recommendation_markdown"]

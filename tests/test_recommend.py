@@ -10,7 +10,7 @@ import pytest
 from peano_bayes.cli import main
 from peano_bayes.errors import PeanoBayesInputError
 from peano_bayes.physics import DEFAULT_CONFIG, PAPER_GEOMETRY, Geometry, scale_parameters, static_force, static_strain
-from peano_bayes.recommend import load_spec, recommend
+from peano_bayes.recommend import load_spec, recommend, recommendation_markdown
 
 NOMINAL = {k: jnp.asarray(v) for k, v in DEFAULT_CONFIG.nominal_parameters().items()}
 
@@ -53,6 +53,7 @@ GOOD = "force_n = 10.0\ncontraction = 0.05\nmax_pressure_kpa = 100\n"
         (GOOD.replace("10.0", "-1"), "force_n: expected a positive number, got -1"),
         (GOOD.replace("10.0", '"ten"'), "force_n: expected a finite number, got 'ten'"),
         (GOOD + "max_hysteresis = 2", "max_hysteresis: expected a fraction in (0, 1], got 2"),
+        (GOOD + "max_response_time_s = 0", "max_response_time_s: expected a positive number, got 0"),
         (GOOD.replace("100", "5000"), "expected at most 1000 kPa"),
     ],
 )
@@ -108,3 +109,27 @@ def test_recommend_command_writes_outputs_and_refuses_a_bad_spec(results, tmp_pa
     assert main(["recommend", "--spec", str(bad), "--results", str(results), "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert "impossible" in err and "Traceback" not in err and not out.exists()
+
+
+def test_response_time_is_contraction_over_step_speed_and_flagged_when_from_the_prior(results, tmp_path):
+    root = tmp_path / "with_metrics"
+    shutil.copytree(results, root)
+    n = 40
+    # Speeds of 0.03 m/s in half the draws and 0.01 m/s in the other half; l0 of the result's geometry.
+    speed = [0.03] * (n // 2) + [0.01] * (n // 2)
+    metrics = {"material": "TP", "draws": {"speed": speed}, "summary": {"speed": {"from_prior": True}}}
+    (root / "TP" / "metrics.json").write_text(json.dumps(metrics))
+    from peano_bayes.metrics import load_result
+    from peano_bayes.recommend import _result_geometry
+
+    l0 = float(_result_geometry(load_result(root / "TP")).flat_length_m)
+    fast, slow = 0.05 * l0 / 0.03, 0.05 * l0 / 0.01  # response times [s] at contraction 0.05
+    grid = "n_tubes = [4]\ntube_width_mm = [15]\ntube_length_mm = [80]\n"
+    easy = GOOD.replace("10.0", "1.0")
+    for bound, expected in ((1.01 * slow, 1.0), (0.5 * (fast + slow), 0.5), (0.99 * fast, 0.0)):
+        spec = _spec(tmp_path, easy + f"max_response_time_s = {bound}\n", grid, f"r{expected}.toml")
+        report = recommend(spec, root, log=lambda m: None)
+        top = report["candidates"][0]
+        assert top["p_each"]["response_time"] == pytest.approx(expected)
+        assert "rests on the prior" in report["notes"][0] and "Note: response time" in recommendation_markdown(report)
+    assert top["binding"] == "response_time"
