@@ -108,12 +108,12 @@ def run_nuts(posterior, centre, warmup: int, samples: int):
     kernel = NUTS(potential_fn=potential, dense_mass=True)
     mcmc = MCMC(kernel, num_warmup=warmup, num_samples=samples, num_chains=1, progress_bar=False)
     t0 = time.perf_counter()
-    mcmc.run(jax.random.PRNGKey(SEED), init_params=jnp.asarray(centre))
+    mcmc.run(jax.random.PRNGKey(SEED), init_params=jnp.asarray(centre), extra_fields=("num_steps",))
     total = time.perf_counter() - t0
     draws = np.asarray(mcmc.get_samples())[None]
     # Second run on the compiled kernel: the time without compilation.
     t0 = time.perf_counter()
-    mcmc.run(jax.random.PRNGKey(SEED + 1), init_params=jnp.asarray(centre))
+    mcmc.run(jax.random.PRNGKey(SEED + 1), init_params=jnp.asarray(centre), extra_fields=("num_steps",))
     warm = time.perf_counter() - t0
     draws2 = np.asarray(mcmc.get_samples())[None]
     steps = float(np.mean(np.asarray(mcmc.get_extra_fields()["num_steps"])))
