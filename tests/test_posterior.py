@@ -97,3 +97,24 @@ def test_denoised_inputs_bring_stroke_residuals_down_to_the_sensor_noise():
     assert raw > 3.0
     assert denoised < 1.5
     assert prepare(data).groups[0].time_s.shape[0] == 1  # three repeats share one simulation
+
+
+def test_compiled_functions_are_shared_with_new_data_only(stroke_data):
+    """with_observations reuses the compiled log posterior on other data of the protocol; any other change
+    (here the likelihood family) gets its own, so it never evaluates the old posterior."""
+    import dataclasses
+
+    post = build_posterior(prepare(stroke_data), prior_for("TP"))
+    theta = np.zeros((2, post.ndim))
+    theta[:, : post.prior.ndim] = np.asarray(post.prior.median_unconstrained())
+    base = post.batched(theta)
+    obs = post.observations
+    shifted = tuple(dataclasses.replace(g, observed=g.observed + 1e-3) for g in obs.groups)  # other measurements
+    moved = post.with_observations(dataclasses.replace(obs, groups=shifted))
+    assert moved._compiled is post._compiled
+    np.testing.assert_allclose(moved.batched(theta), [float(moved.log_prob(theta[0]))] * 2, rtol=1e-12)
+    assert not np.allclose(moved.batched(theta), base)
+    student = dataclasses.replace(post, family="student_t")
+    assert student._compiled is not post._compiled
+    np.testing.assert_allclose(student.batched(theta), [float(student.log_prob(theta[0]))] * 2, rtol=1e-12)
+    assert not np.allclose(student.batched(theta), base)

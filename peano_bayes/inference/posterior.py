@@ -66,8 +66,9 @@ class Posterior:
     config: ModelConfig
     fixed: dict
     family: str = "gaussian"
-    # Compiled functions, shared (by reference) with every posterior made by :meth:`with_observations`.
-    _compiled: dict = field(default_factory=dict, repr=False)
+    # Compiled functions, shared (by reference) only with the posteriors made by :meth:`with_observations`;
+    # any other ``dataclasses.replace`` (another prior, fixed values or family) starts an empty one.
+    _compiled: dict = field(default_factory=dict, repr=False, init=False)
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -164,7 +165,9 @@ class Posterior:
             self.observations.specimens != observations.specimens
         ):
             raise ValueError("with_observations needs data of the same protocol: tests, specimens, runs and bins")
-        return dataclasses.replace(self, observations=observations)
+        other = dataclasses.replace(self, observations=observations)
+        object.__setattr__(other, "_compiled", self._compiled)
+        return other
 
     def observed(self) -> dict[str, np.ndarray]:
         """The measured bins, in :meth:`pointwise` order: ``value``, ``test``, ``specimen``, ``run``,
