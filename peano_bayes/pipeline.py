@@ -168,7 +168,6 @@ def infer(
         )
 
     centre, covariance = walker_start(posterior, fitted)
-    t0 = time.perf_counter()
     n_walkers = walker_count(n_walkers, posterior.ndim)
     laplace = None
     if not (resume and state_path.exists()):  # a resumed run restores its walkers and needs no start
@@ -180,7 +179,7 @@ def infer(
             f"{code}: mode found in {laplace.steps} steps, {laplace.seconds:.1f} s, log posterior "
             f"{laplace.log_prob:.1f}" + (f" ({laplace.status})" if laplace.status else "")
         )
-        t0 = time.perf_counter()
+    t0 = time.perf_counter()
     warm = np.tile(centre, (n_walkers, 1))
     posterior.batched(warm)
     posterior.batched(warm[: n_walkers // 2])

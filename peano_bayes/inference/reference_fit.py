@@ -17,6 +17,8 @@ are in ``paper/model_benchmarks.csv``.
 
 from __future__ import annotations
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -103,15 +105,8 @@ def scaled_veale_geometry(tube_width_m: float, tube_length_m: float) -> VealePar
     """Table 2's parameters with the linkage scaled by tube width and both areas by tube length."""
     w, length = tube_width_m / TABLE2_TUBE_WIDTH_M, tube_length_m / TABLE2_TUBE_LENGTH_M
     t = VEALE_TABLE2
-    return VealeParameters(
-        width_m=t.width_m * w,
-        linkage_m=t.linkage_m * w,
-        area1_m2=t.area1_m2 * length,
-        area2_m2=t.area2_m2 * length,
-        tensile_ka_n_per_m=t.tensile_ka_n_per_m,
-        tensile_kb_n_per_m2=t.tensile_kb_n_per_m2,
-        bending_quartic_n_per_m5=t.bending_quartic_n_per_m5,
-        bending_linear_n_per_m2=t.bending_linear_n_per_m2,
+    return dataclasses.replace(
+        t, width_m=t.width_m * w, linkage_m=t.linkage_m * w, area1_m2=t.area1_m2 * length, area2_m2=t.area2_m2 * length
     )
 
 
@@ -119,14 +114,7 @@ _STIFFNESS = ("tensile_ka_n_per_m", "tensile_kb_n_per_m2", "bending_quartic_n_pe
 
 
 def _with_stiffness(geometry: VealeParameters, log_k) -> VealeParameters:
-    values = dict(zip(_STIFFNESS, jnp.exp(log_k), strict=True))
-    return VealeParameters(
-        width_m=geometry.width_m,
-        linkage_m=geometry.linkage_m,
-        area1_m2=geometry.area1_m2,
-        area2_m2=geometry.area2_m2,
-        **values,
-    )
+    return dataclasses.replace(geometry, **dict(zip(_STIFFNESS, jnp.exp(log_k), strict=True)))
 
 
 #: Veale's force is not differentiable at p = 0 for eps >= 0 (it grows like p^(2/3)): bins of a slack muscle

@@ -36,6 +36,7 @@ import json
 import os
 import time
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 
 import arviz as az
@@ -76,18 +77,25 @@ class IndependenceProposal:
         values = np.maximum(values, 1e-12 * max(values.max(), 1e-300))
         return cls(mean, (vectors * values) @ vectors.T, df)
 
+    @cached_property
+    def _cholesky(self) -> np.ndarray:
+        return np.linalg.cholesky(self.covariance)
+
+    @cached_property
+    def _distribution(self):
+        return stats.multivariate_t(self.mean, self.covariance, df=self.df)
+
     def log_density(self, x: np.ndarray) -> np.ndarray:
         """(n,) log density of the proposal at ``x`` (n, D)."""
-        return np.atleast_1d(stats.multivariate_t.logpdf(x, self.mean, self.covariance, df=self.df))
+        return np.atleast_1d(self._distribution.logpdf(x))
 
     def __call__(self, coords: np.ndarray, random: np.random.RandomState):
         """emcee's proposal contract: new points (n, D) and log Hastings factors q(old) / q(new) (n,), drawn
         with emcee's own random state (so a resumed run repeats them)."""
         n, d = coords.shape
-        chol = np.linalg.cholesky(self.covariance)
         z = random.standard_normal((n, d))
         w = random.chisquare(self.df, size=n) / self.df
-        new = self.mean + (z @ chol.T) / np.sqrt(w)[:, None]
+        new = self.mean + (z @ self._cholesky.T) / np.sqrt(w)[:, None]
         return new, self.log_density(coords) - self.log_density(new)
 
 
