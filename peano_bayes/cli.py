@@ -41,7 +41,15 @@ def _build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from . import commands  # noqa: F401  (registers the subcommands)
+    from . import (
+        commands,  # noqa: F401  (registers the subcommands)
+        enable_compilation_cache,
+    )
+
+    try:
+        enable_compilation_cache()
+    except OSError:  # an unwritable home: compile every time
+        pass
 
     parser = _build_parser()
     args = parser.parse_args(argv)

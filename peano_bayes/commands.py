@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 from .cli import command
 
@@ -376,3 +377,39 @@ def _recommend_arguments(p):
 
 
 recommend_command.arguments = _recommend_arguments
+
+
+@command("discover", "find, name and add the effect the base model misses; report the gap before and after")
+def discover_command(args):
+    from .data import load
+    from .discovery import DEFAULT_BASE, discover, discovery_data, write_report
+    from .discovery.effects import check_effects
+
+    base = check_effects(args.base.split(",")) if args.base else DEFAULT_BASE
+    dataset = load(args.data)  # validate before anything is written
+    split = discovery_data(dataset, specimen=args.specimen)
+    say = (lambda line: None) if args.json else (lambda line: print(line, flush=True))
+    say(f"{len(split.fit_runs)} fitted and {len(split.held_out_runs)} held-out runs of specimen {split.specimen} "
+        "(the first fit compiles the model: a few minutes)")
+    result = discover(split, base=base, seed=args.seed, progress=say)
+    written = write_report(result, Path(args.out))
+    report = result.report
+    say(f"verdict: {report['verdict']}" + (f" ({', '.join(report['named'])})" if report["named"] else ""))
+    say(f"wrote {', '.join(str(p) for p in written)}")
+    return report
+
+
+def _discover_arguments(p):
+    p.add_argument("data", metavar="DATA.csv", help="the dataset CSV (with its TOML sidecar)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output directory for report.json, report.md, figures/")
+    p.add_argument(
+        "--base",
+        metavar="EFFECTS",
+        default=None,
+        help="comma-separated effects already in the base model (default: tensile_stiffness,bending_stiffness)",
+    )
+    p.add_argument("--specimen", default=None, help="specimen to analyse (default: the first in the file)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the base fit's extra starts and the block tests")
+
+
+discover_command.arguments = _discover_arguments

@@ -129,3 +129,19 @@ __all__ = [
     "published_versus_posterior",
     "recommendation_bars",
 ]
+
+
+def residuals_against(ax, x, before, after, *, xlabel: str, title: str = ""):
+    """Standardized residuals (in noise sd) of the base and the final model against one covariate ``x``:
+    ``before`` and ``after`` are ``(residuals (n,), (bin centres, bin means))``; points and binned means."""
+    r_before, (cb, mb) = before
+    r_after, (ca, ma) = after
+    ax.scatter(x, r_before, s=3, alpha=0.25, color=PUBLISHED_COLOUR, label="base model", rasterized=True)
+    ax.scatter(x, r_after, s=3, alpha=0.25, color=MODEL_COLOUR, label="final model", rasterized=True)
+    ax.plot(cb, mb, color=PUBLISHED_COLOUR, lw=1.8)
+    ax.plot(ca, ma, color=MODEL_COLOUR, lw=1.8)
+    ax.axhline(0.0, color=DATA_COLOUR, lw=0.8)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("residual / noise sd [-]")
+    if title:
+        ax.set_title(title)

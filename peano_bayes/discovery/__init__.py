@@ -1,0 +1,30 @@
+"""Discrepancy workflow: find where the model and the data disagree, name the missing effect, add it, and show
+the gap shrink (research/DISCREPANCY.md; effect names of DESIGN.md section 5).
+
+Data flow: a rig :class:`~peano_bayes.data.Dataset` -> :func:`discovery_data` (one specimen, binned, whole
+runs split into fit and held-out, covariates) -> :func:`discover` (base fit, diagnosis, screening of the
+:data:`LIBRARY`, gates) -> :func:`write_report`. :mod:`.harness` validates it on data with hidden effects.
+"""
+
+from .data import SplitData, discovery_data
+from .effects import CONFUSABLE, LIBRARY, NOISE_EFFECTS, PHYSICS_EFFECTS, Effect
+from .model import DEFAULT_BASE, SUPERSET_CONFIG
+from .report import report_markdown, write_report
+from .workflow import Discovery, Gates, discover
+
+__all__ = [
+    "CONFUSABLE",
+    "DEFAULT_BASE",
+    "Discovery",
+    "Effect",
+    "Gates",
+    "LIBRARY",
+    "NOISE_EFFECTS",
+    "PHYSICS_EFFECTS",
+    "SUPERSET_CONFIG",
+    "SplitData",
+    "discover",
+    "discovery_data",
+    "report_markdown",
+    "write_report",
+]

@@ -1,0 +1,233 @@
+"""Rig data for discovery: one specimen's runs, binned, split into fit and held-out runs, with covariates.
+
+**Split (whole runs, never single samples):** the runs of one test condition (test and, for load cycles, the
+pressure) are numbered in the order they were run: the cycle index. The run with cycle index 1 of every
+condition that has at least two runs is held out; the others are fitted. Held-out runs are repeats of fitted
+protocols, so the held-out error measures model error plus noise, not extrapolation.
+
+**Noise:** each sensor's noise sd [signal unit per raw sample] is estimated from the raw signal alone
+(:func:`~peano_bayes.inference.denoise.noise_sd`, second differences, in the quasi-static tests), so the
+likelihood of every candidate model is measured against the same, model-free noise scale; a bin mean of ``k``
+samples has sd ``sd / sqrt(k)``.
+
+**Inputs:** repeats of one condition share the mean of their denoised driving inputs (see
+:func:`_average_repeat_inputs`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from types import MappingProxyType
+
+import numpy as np
+
+from ..data import Dataset
+from ..errors import PeanoBayesInputError
+from ..inference.denoise import noise_sd
+from ..inference.likelihood import OBSERVED, RunGroup, prepare
+from .model import DiscoveryData
+
+#: Samples per bin by test for discovery (coarser than inference: screening many refits must be fast).
+DISCOVERY_BIN_SIZES = MappingProxyType({"load_cycle": 4, "blocking": 4, "stroke": 4, "step": 2})
+#: Bins per block of the block tests (residuals within a block are treated as dependent).
+BLOCK_BINS = 10
+#: Pressure resolution [Pa] that tells load-cycle conditions apart.
+_PRESSURE_CLASS_PA = 10e3
+
+
+@dataclass(frozen=True, eq=False)
+class Covariates:
+    """Per flat bin (n,) of a :class:`DiscoveryData`, in its residual order.
+
+    **Fields:** ``test`` (str); ``run`` run number in the dataset; ``block`` block id (runs split every
+    :data:`BLOCK_BINS` bins); ``cycle`` cycle index; ``pressure_pa`` mean muscle (step: supply) pressure;
+    ``strain`` mean strain (input of load cycles and blocking, observed in stroke and step) [-];
+    ``rate_sign`` sign of the commanded strain rate in load cycles (0 elsewhere); ``time_since_step_s``
+    (step runs; NaN elsewhere); ``session_s`` bin time plus the durations of the runs before it [s].
+    """
+
+    test: np.ndarray
+    run: np.ndarray
+    block: np.ndarray
+    cycle: np.ndarray
+    pressure_pa: np.ndarray
+    strain: np.ndarray
+    rate_sign: np.ndarray
+    time_since_step_s: np.ndarray
+    session_s: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class SplitData:
+    """What :func:`discovery_data` returns: ``fit`` and ``held_out`` data, their covariates, the noise sd per
+    test [per raw sample], the specimen analysed and the run keys of each part."""
+
+    fit: DiscoveryData
+    held_out: DiscoveryData
+    fit_covariates: Covariates
+    held_out_covariates: Covariates
+    noise_sd: dict
+    specimen: str
+    fit_runs: tuple
+    held_out_runs: tuple
+
+
+def _cycle_indices(dataset: Dataset, specimen: str) -> dict:
+    """(specimen, test, run) -> cycle index within its condition, and the size of each condition."""
+    conditions: dict[tuple, list] = {}
+    for run in dataset.runs:
+        if run.specimen != specimen:
+            continue
+        level = round(float(np.nanmedian(run.pressure_pa)) / _PRESSURE_CLASS_PA) if run.test == "load_cycle" else 0
+        conditions.setdefault((run.test, level), []).append(run)
+    out = {}
+    for runs in conditions.values():
+        for index, run in enumerate(sorted(runs, key=lambda r: r.run)):
+            out[run.key] = (index, len(runs))
+    return out
+
+
+def _take(group: RunGroup, rows: np.ndarray, cycle: np.ndarray) -> RunGroup:
+    pick = lambda a: None if a is None else np.asarray(a)[rows]  # noqa: E731
+    return replace(
+        group,
+        keys=tuple(group.keys[i] for i in rows),
+        specimen_index=np.asarray(cycle, dtype=int),
+        time_s=pick(group.time_s),
+        strain=pick(group.strain),
+        pressure_pa=pick(group.pressure_pa),
+        supply_pa=pick(group.supply_pa),
+        load_n=pick(group.load_n),
+        observed=pick(group.observed),
+        counts=pick(group.counts),
+        shared=np.arange(len(rows)),
+        bin_time_s=pick(group.bin_time_s),
+    )
+
+
+def _covariates(groups, cycles, session_start: dict) -> Covariates:
+    cols: dict[str, list] = {k: [] for k in Covariates.__dataclass_fields__}
+    block_id = 0
+    for group, cycle in zip(groups, cycles, strict=True):
+        r, m = group.observed.shape
+        p = group.points_per_bin
+        for i in range(r):
+            key = group.keys[i]
+            cols["test"].append(np.full(m, group.test))
+            cols["run"].append(np.full(m, key[2]))
+            cols["cycle"].append(np.full(m, cycle[i]))
+            blocks = np.arange(m) // BLOCK_BINS
+            cols["block"].append(block_id + blocks)
+            block_id += int(blocks[-1]) + 1
+            source = group.supply_pa if group.test == "step" else group.pressure_pa
+            cols["pressure_pa"].append(np.asarray(source[i]).reshape(m, p).mean(axis=1))
+            strain_in = np.asarray(group.strain[i]).reshape(m, p).mean(axis=1)
+            observed_strain = OBSERVED[group.test][0] == "strain"
+            cols["strain"].append(np.asarray(group.observed[i]) if observed_strain else strain_in)
+            rate = np.sign(np.gradient(strain_in)) if group.test == "load_cycle" else np.zeros(m)
+            cols["rate_sign"].append(rate)
+            t = np.asarray(group.bin_time_s[i])
+            if group.test == "step":
+                supply = np.asarray(group.supply_pa[i]).reshape(m, p).mean(axis=1)
+                edge = t[int(np.argmax(np.abs(np.diff(supply)))) + 1] if m > 1 else t[0]
+                cols["time_since_step_s"].append(t - edge)
+            else:
+                cols["time_since_step_s"].append(np.full(m, np.nan))
+            cols["session_s"].append(t + session_start[key])
+    return Covariates(**{k: np.concatenate(v) for k, v in cols.items()})
+
+
+#: Tests whose signal changes slowly against the sampling rate: the noise of each sensor is estimated there.
+_QUIET_TESTS = {"force_n": ("load_cycle", "blocking"), "strain": ("stroke", "load_cycle", "blocking")}
+
+
+def _sensor_noise(runs, specimen: str) -> dict:
+    """Per test, the noise sd of its observed signal's sensor, estimated where that sensor's signal is slow
+    (a step response rings faster than it is sampled, so second differences there overstate the noise)."""
+    noise = {}
+    for test in {run.test for run in runs}:
+        signal = OBSERVED[test][0]
+        quiet = [r for r in runs if r.test in _QUIET_TESTS[signal] and np.all(np.isfinite(getattr(r, signal)))]
+        source = quiet or [r for r in runs if r.test == test]
+        noise[test] = float(np.median([noise_sd(getattr(r, signal)) for r in source]))
+        if not noise[test] > 0:
+            raise PeanoBayesInputError(
+                f"the {signal} signal of specimen {specimen!r} shows no noise; cannot scale residuals"
+            )
+    return noise
+
+
+def _average_repeat_inputs(group: RunGroup, cycles: dict) -> RunGroup:
+    """Every run's denoised driving inputs replaced by the mean over the repeats of its condition: repeats run
+    one commanded protocol, and a run's own input-denoising error would otherwise differ between fitted and
+    held-out runs."""
+    condition = {}
+    for i, key in enumerate(group.keys):
+        condition.setdefault(
+            (cycles[key][1], round(float(np.mean(group.pressure_pa[i])) / _PRESSURE_CLASS_PA)), []
+        ).append(i)
+    out = {}
+    for name in ("strain", "pressure_pa", "supply_pa"):
+        a = getattr(group, name)
+        if a is None:
+            continue
+        a = np.array(a, dtype=float)
+        for rows in condition.values():
+            a[rows] = a[rows].mean(axis=0)
+        out[name] = a
+    return replace(group, **out)
+
+
+def discovery_data(dataset: Dataset, *, specimen: str | None = None, bin_sizes=DISCOVERY_BIN_SIZES) -> SplitData:
+    """Bin ``specimen``'s runs (default: the first specimen), split them (see the module docstring), estimate the
+    noise and collect covariates. Raises :class:`PeanoBayesInputError` for an unknown specimen or when no
+    condition has a second run to hold out."""
+    specimens = tuple(dataset.specimens)
+    specimen = specimens[0] if specimen is None else specimen
+    if specimen not in specimens:
+        raise PeanoBayesInputError(f"specimen {specimen!r} is not in the dataset; it has {', '.join(specimens)}")
+    runs = [run for run in dataset.runs if run.specimen == specimen]
+    one = replace(dataset, runs=tuple(runs))
+    cycles = _cycle_indices(dataset, specimen)
+    if not any(size >= 2 for _, size in cycles.values()):
+        raise PeanoBayesInputError(
+            f"specimen {specimen!r} has no test condition with two or more runs; discovery holds out a repeat "
+            "of each condition to score candidate effects, so it needs repeated runs"
+        )
+    session_start, elapsed = {}, 0.0
+    for run in runs:
+        session_start[run.key] = elapsed
+        elapsed += float(run.time_s[-1] - run.time_s[0])
+    noise = _sensor_noise(runs, specimen)
+    observations = prepare(one, bin_sizes, share_repeats=False)
+    groups = [_average_repeat_inputs(g, cycles) for g in observations.groups]
+    parts: dict[bool, tuple[list, list]] = {False: ([], []), True: ([], [])}
+    for group in groups:
+        info = np.array([cycles[key] for key in group.keys])
+        held = (info[:, 0] == 1) & (info[:, 1] >= 2)
+        for flag in (False, True):
+            rows = np.flatnonzero(held == flag)
+            if rows.size:
+                parts[flag][0].append(_take(group, rows, info[rows, 0]))
+                parts[flag][1].append(info[rows, 0])
+    n_cycles = int(max(index for index, _ in cycles.values()) + 1)
+
+    def build(flag):
+        groups = tuple(parts[flag][0])
+        sd = tuple(noise[g.test] / np.sqrt(g.counts) for g in groups)
+        return DiscoveryData(groups, sd, n_cycles, dataset.geometry), _covariates(groups, parts[flag][1], session_start)
+
+    (fit, fit_cov), (held, held_cov) = build(False), build(True)
+    return SplitData(
+        fit,
+        held,
+        fit_cov,
+        held_cov,
+        noise,
+        specimen,
+        tuple(k for g in fit.groups for k in g.keys),
+        tuple(k for g in held.groups for k in g.keys),
+    )
+
+
+__all__ = ["BLOCK_BINS", "Covariates", "DISCOVERY_BIN_SIZES", "SplitData", "discovery_data"]

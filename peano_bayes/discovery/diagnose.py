@@ -1,0 +1,150 @@
+"""Residual structure: one targeted statistic per effect signature, and an omnibus test, both respecting the
+correlation of residuals in time.
+
+**Signature statistic:** each signature is a weight vector ``w`` over the flat bins, built from covariates and
+the fitted model's predictions (research/DISCREPANCY.md section 2). Its strength in standardized residuals
+``r`` is ``T = |sum w r| / sqrt(sum w^2)`` (a z-score for white unit residuals). Its p-value is a block
+sign-flip test: the bins' contributions are summed per block (:data:`~peano_bayes.discovery.data.BLOCK_BINS`
+consecutive bins of one run), and the block sums' signs are flipped at random; under "no structure" a block sum
+is symmetric about zero whatever the correlation inside the block.
+
+``session_trend`` (force residuals against time in the session) belongs to no library effect: slow sensor drift
+shows there.
+
+**Omnibus:** per block, ``z_b = sum r / sqrt(n_b)``; ``sum z_b^2`` is chi-square with one degree of freedom per
+block when the model and the noise scale are right.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+from .data import Covariates
+
+#: Random sign flips per p-value.
+N_FLIPS = 20000
+
+
+def _normalize(w: np.ndarray) -> np.ndarray:
+    scale = np.sqrt(np.sum(w**2))
+    return w / scale if scale > 0 else w
+
+
+def _centred(w: np.ndarray, where: np.ndarray) -> np.ndarray:
+    out = np.zeros_like(w, dtype=float)
+    if where.any():
+        out[where] = w[where] - w[where].mean()
+    return out
+
+
+def signature_weights(cov: Covariates, predicted: np.ndarray) -> dict[str, np.ndarray]:
+    """name -> weight vector (n,) of every signature, from covariates and the model's predicted signal (n,)."""
+    test = cov.test
+    cycle_force = test == "load_cycle"
+    force = cycle_force | (test == "blocking")
+    stroke, step = test == "stroke", test == "step"
+    p_max = max(float(np.nanmax(cov.pressure_pa)), 1.0)
+    p = cov.pressure_pa / p_max
+    ts = np.nan_to_num(cov.time_since_step_s, nan=-1.0)
+    velocity = np.zeros_like(predicted)
+    for run in np.unique(cov.run[step]):
+        rows = np.flatnonzero(step & (cov.run == run))
+        if rows.size > 1:
+            velocity[rows] = np.gradient(predicted[rows])
+    low = (force & (test == "blocking")) | stroke
+    weights = {
+        "loading_split": np.where(cycle_force, cov.rate_sign, 0.0),
+        "force_level": _centred(np.abs(predicted), force),
+        "blocking_pressure": _centred(p, test == "blocking"),
+        "free_strain": np.where(stroke & (p > 0.2), 1.0 / np.maximum(p, 0.2), 0.0),
+        "extension": np.where(cycle_force & (cov.strain < 0), -cov.strain, 0.0),
+        "low_pressure": np.where(low, np.maximum(0.0, 1.0 - p / 0.3), 0.0),
+        "step_onset": np.where(step & (ts >= 0) & (ts < 0.03), 1.0, 0.0),
+        "step_motion": np.where(step & (ts >= 0), velocity, 0.0),
+        "first_cycle": _centred((cov.cycle == 0).astype(float), force),
+        "force_offset": np.where(force, 1.0, 0.0),
+        "noise_level": _centred(np.abs(predicted), force),
+        "session_trend": _centred(cov.session_s, force),
+    }
+    return {k: _normalize(v) for k, v in weights.items()}
+
+
+#: Signatures tested on ``r^2 - 1`` (noise level) instead of ``r``.
+SQUARED = frozenset({"noise_level"})
+SIGNATURES = (
+    "loading_split",
+    "force_level",
+    "blocking_pressure",
+    "free_strain",
+    "extension",
+    "low_pressure",
+    "step_onset",
+    "step_motion",
+    "first_cycle",
+    "force_offset",
+    "noise_level",
+    "session_trend",
+)
+
+
+@dataclass(frozen=True)
+class Diagnosis:
+    """Residual structure of one fit: per signature ``T`` and block sign-flip ``p``; the omnibus chi-square
+    ``p`` (reported only: errors of the denoised inputs leave structure no effect explains); Holm-adjusted
+    signature p-values; and whether structure is left: some signature significant at ``alpha`` after Holm."""
+
+    statistic: dict
+    p_value: dict
+    p_holm: dict
+    omnibus_p: float
+    alpha: float
+
+    @property
+    def structure_left(self) -> bool:
+        return min(self.p_holm.values()) < self.alpha
+
+
+def signature_statistic(r: np.ndarray, w: np.ndarray, squared: bool = False) -> float:
+    """``T = |sum w v| / sqrt(sum w^2)`` with ``v = r`` (or ``r^2 - 1``)."""
+    v = r**2 - 1.0 if squared else r
+    norm = np.sqrt(np.sum(w**2))
+    return float(abs(np.sum(w * v)) / norm) if norm > 0 else 0.0
+
+
+def _holm(p: dict) -> dict:
+    names = sorted(p, key=p.get)
+    out, running = {}, 0.0
+    for i, name in enumerate(names):
+        running = max(running, min(1.0, (len(names) - i) * p[name]))
+        out[name] = running
+    return out
+
+
+def diagnose(r: np.ndarray, cov: Covariates, predicted: np.ndarray, *, alpha: float = 0.01, seed: int = 0) -> Diagnosis:
+    """Signature statistics and p-values of standardized residuals ``r`` (n,) of a fit."""
+    rng = np.random.default_rng(seed)
+    blocks = np.unique(cov.block, return_inverse=True)[1]
+    n_blocks = int(blocks.max()) + 1
+    flips = rng.choice([-1.0, 1.0], size=(N_FLIPS, n_blocks))
+    weights = signature_weights(cov, predicted)
+    statistic, p_value = {}, {}
+    for name in SIGNATURES:
+        w = weights[name]
+        v = r**2 - 1.0 if name in SQUARED else r
+        sums = np.bincount(blocks, weights=w * v, minlength=n_blocks)
+        observed = abs(sums.sum())
+        statistic[name] = signature_statistic(r, w, name in SQUARED)
+        if not np.any(w):
+            p_value[name] = 1.0
+            continue
+        p_value[name] = float((1 + np.sum(np.abs(flips @ sums) >= observed - 1e-12)) / (N_FLIPS + 1))
+    counts = np.bincount(blocks, minlength=n_blocks)
+    z = np.bincount(blocks, weights=r, minlength=n_blocks) / np.sqrt(np.maximum(counts, 1))
+    omnibus = float(stats.chi2.sf(np.sum(z**2), n_blocks))
+    return Diagnosis(statistic, p_value, _holm(p_value), omnibus, alpha)
+
+
+__all__ = ["Diagnosis", "N_FLIPS", "SIGNATURES", "diagnose", "signature_statistic", "signature_weights"]

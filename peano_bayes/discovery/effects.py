@@ -1,0 +1,283 @@
+"""The closed library of candidate effects the discovery workflow may name (DESIGN.md section 5).
+
+Each :class:`Effect` frees a set of parameters of the discovery model (:mod:`.model`); while it is inactive
+those parameters sit at its ``off`` values, at which it changes no prediction (nesting, tested in
+``tests/test_discovery.py``). ``strength`` names the parameters whose posterior must exclude ``off`` before the
+effect is accepted, and ``signature`` the residual pattern its absence leaves (:mod:`.diagnose`).
+
+Physics effects are elements of :class:`~peano_bayes.physics.ModelConfig` (or, for ``cyclic_softening``, a
+per-cycle stiffness factor); noise-side effects change only the sensor or the noise model, so that a sensor
+problem is never reported as physics.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Literal
+
+from ..physics.model import PARAMETERS, Parameter
+
+#: Parameters of the discovery model that are not physics parameters (not in ``PARAMETERS``):
+#: unit, meaning, nominal, bounds, off; and the Gaussian regularizer (mean, sd) on the fitted scale.
+EXTRA_PARAMETERS: dict[str, Parameter] = {
+    "cyclic_softening_fraction": Parameter(
+        "-", "extra wall stiffness of cycle n: factor 1 + a exp(-n) (Mullins-like softening)", 0.1, (0.0, 2.0), 0.0
+    ),
+    "sensor_offset_n": Parameter("N", "load cell zero offset", 0.0, (-50.0, 50.0), 0.0),
+    "sensor_gain": Parameter("-", "load cell gain error (measured = gain x true)", 1.0, (0.5, 2.0), 1.0),
+    "noise_slope_per_n": Parameter(
+        "1/N", "heteroscedastic force noise: sd = sd0 (1 + slope |F|)", 0.02, (0.0, 10.0), 0.0
+    ),
+}
+
+
+def parameter_spec(name: str) -> Parameter:
+    """The :class:`~peano_bayes.physics.Parameter` of a physics or discovery-only parameter."""
+    return EXTRA_PARAMETERS[name] if name in EXTRA_PARAMETERS else PARAMETERS[name]
+
+
+@dataclass(frozen=True)
+class Effect:
+    """One candidate effect.
+
+    **Fields:** ``name`` (DESIGN.md section 5); ``meaning``; ``kind`` ``"physics"`` or ``"noise"``;
+    ``params`` the parameters it frees; ``off`` name -> value at which it changes nothing (the others of
+    ``params`` are held at ``hold`` while inactive); ``start`` name -> weak but non-zero value its screening
+    fit starts from; ``strength`` the parameters tested against ``off``; ``signature`` the residual pattern
+    its absence leaves (a key of :data:`~peano_bayes.discovery.diagnose.SIGNATURES`); ``shows_in`` the rig
+    tests where that pattern appears.
+    """
+
+    name: str
+    meaning: str
+    kind: Literal["physics", "noise"]
+    params: tuple[str, ...]
+    off: MappingProxyType
+    start: MappingProxyType
+    strength: tuple[str, ...]
+    signature: str
+    shows_in: tuple[str, ...]
+    hold: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))
+
+
+def _effect(name, meaning, kind, params, off, start, strength, signature, shows_in, hold=None) -> Effect:
+    return Effect(
+        name,
+        meaning,
+        kind,
+        tuple(params),
+        MappingProxyType(dict(off)),
+        MappingProxyType(dict(start)),
+        tuple(strength),
+        signature,
+        tuple(shows_in),
+        MappingProxyType(dict(hold or {})),
+    )
+
+
+#: Rigid-tube stand-in for "no tensile compliance": the upper bound of ``tensile_ka_n_per_m``. The ideal
+#: model's blocking force is infinite; a load cycle that stretches the muscle cannot be simulated without it.
+RIGID_TENSILE_N_PER_M = PARAMETERS["tensile_ka_n_per_m"].bounds[1]
+#: Unrestricted inlet: the upper bound of ``orifice_area_m2`` (the pressure drop at step flows is < 1 Pa).
+OPEN_ORIFICE_M2 = PARAMETERS["orifice_area_m2"].bounds[1]
+
+_LIST = (
+    _effect(
+        "hysteresis",
+        "rate-independent friction between the tube walls (Dahl element): loading and unloading curves split",
+        "physics",
+        ("friction_force_n", "friction_pressure_fraction", "friction_stiffness_n_per_m"),
+        {"friction_force_n": 0.0, "friction_pressure_fraction": 0.0},
+        {"friction_force_n": 0.05, "friction_pressure_fraction": 5e-4, "friction_stiffness_n_per_m": 2e4},
+        ("friction_force_n", "friction_pressure_fraction"),
+        "loading_split",
+        ("load_cycle",),
+        {"friction_stiffness_n_per_m": 2e4},
+    ),
+    _effect(
+        "viscoelastic_relaxation",
+        "a Maxwell branch (spring and dashpot) across the tubes: a rate-dependent loss and relaxation",
+        "physics",
+        ("parallel_maxwell1_k_n_per_m", "parallel_maxwell1_tau_s"),
+        {"parallel_maxwell1_k_n_per_m": 0.0},
+        {"parallel_maxwell1_k_n_per_m": 50.0, "parallel_maxwell1_tau_s": 1.0},
+        ("parallel_maxwell1_k_n_per_m",),
+        "loading_split",
+        ("load_cycle",),
+        {"parallel_maxwell1_tau_s": 1.0},
+    ),
+    _effect(
+        "series_compliance",
+        "a compliant mount or coupling in series: measured stiffness and blocking force lower than the tubes'",
+        "physics",
+        ("mount_compliance_m_per_n",),
+        {"mount_compliance_m_per_n": 0.0},
+        {"mount_compliance_m_per_n": 1e-7},
+        ("mount_compliance_m_per_n",),
+        "force_level",
+        ("load_cycle", "blocking"),
+    ),
+    _effect(
+        "bending_stiffness",
+        "bending resistance of the tube walls: free strain below the ideal tubes', most at low pressure",
+        "physics",
+        ("bending_k1_n", "bending_k2_n", "bending_exponent"),
+        {"bending_k1_n": 0.0, "bending_k2_n": 0.0},
+        {"bending_k1_n": 0.02, "bending_k2_n": 0.2, "bending_exponent": 6.0},
+        ("bending_k1_n", "bending_k2_n"),
+        "free_strain",
+        ("stroke", "step"),
+        {"bending_exponent": 6.0},
+    ),
+    _effect(
+        "tensile_stiffness",
+        "stretch of the tube film under load: finite blocking force, force lower near zero contraction",
+        "physics",
+        ("tensile_ka_n_per_m", "tensile_kb_n_per_m2"),
+        {"tensile_ka_n_per_m": RIGID_TENSILE_N_PER_M, "tensile_kb_n_per_m2": 0.0},
+        {"tensile_ka_n_per_m": 2e5, "tensile_kb_n_per_m2": 1e5},
+        ("tensile_ka_n_per_m",),
+        "blocking_pressure",
+        ("blocking", "load_cycle"),
+    ),
+    _effect(
+        "strain_stiffening",
+        "passive stiffening in extension as the fibres align: force rises steeply when stretched",
+        "physics",
+        ("extension_k_n_per_m", "extension_rate"),
+        {"extension_k_n_per_m": 0.0},
+        {"extension_k_n_per_m": 20.0, "extension_rate": 50.0},
+        ("extension_k_n_per_m",),
+        "extension",
+        ("load_cycle",),
+        {"extension_rate": 50.0},
+    ),
+    _effect(
+        "threshold_pressure",
+        "a pressure below which the flat tubes do not open: no force or stroke at low pressure",
+        "physics",
+        ("threshold_pressure_pa",),
+        {"threshold_pressure_pa": 0.0},
+        {"threshold_pressure_pa": 500.0},
+        ("threshold_pressure_pa",),
+        "low_pressure",
+        ("blocking", "stroke"),
+    ),
+    _effect(
+        "flow_restriction",
+        "a restriction of the inlet: the muscle pressure lags the supply in a step",
+        "physics",
+        ("orifice_area_m2",),
+        {"orifice_area_m2": OPEN_ORIFICE_M2},
+        {"orifice_area_m2": 0.9 * OPEN_ORIFICE_M2},
+        ("orifice_area_m2",),
+        "step_onset",
+        ("step",),
+    ),
+    _effect(
+        "nonlinear_damping",
+        "direction-dependent and quadratic damping of the moving load: rise and fall differ, overshoot damped",
+        "physics",
+        ("damping_up_ns_per_m", "damping_down_ns_per_m", "damping_quadratic_ns2_per_m2"),
+        {"damping_up_ns_per_m": 0.0, "damping_down_ns_per_m": 0.0, "damping_quadratic_ns2_per_m2": 0.0},
+        {"damping_up_ns_per_m": 2.0, "damping_down_ns_per_m": 2.0, "damping_quadratic_ns2_per_m2": 5.0},
+        ("damping_up_ns_per_m", "damping_down_ns_per_m", "damping_quadratic_ns2_per_m2"),
+        "step_motion",
+        ("step",),
+    ),
+    _effect(
+        "cyclic_softening",
+        "the first cycles of a test are stiffer than later ones (Mullins-like damage of the film)",
+        "physics",
+        ("cyclic_softening_fraction",),
+        {"cyclic_softening_fraction": 0.0},
+        {"cyclic_softening_fraction": 0.01},
+        ("cyclic_softening_fraction",),
+        "first_cycle",
+        ("load_cycle", "blocking"),
+    ),
+    _effect(
+        "sensor_offset",
+        "a zero offset of the load cell (not physics)",
+        "noise",
+        ("sensor_offset_n",),
+        {"sensor_offset_n": 0.0},
+        {"sensor_offset_n": 0.0},
+        ("sensor_offset_n",),
+        "force_offset",
+        ("load_cycle", "blocking"),
+    ),
+    _effect(
+        "sensor_gain",
+        "a gain error of the load cell (not physics)",
+        "noise",
+        ("sensor_gain",),
+        {"sensor_gain": 1.0},
+        {"sensor_gain": 1.0},
+        ("sensor_gain",),
+        "force_level",
+        ("load_cycle", "blocking"),
+    ),
+    _effect(
+        "heteroscedastic_noise",
+        "force noise that grows with the force (not physics)",
+        "noise",
+        ("noise_slope_per_n",),
+        {"noise_slope_per_n": 0.0},
+        {"noise_slope_per_n": 0.01},
+        ("noise_slope_per_n",),
+        "noise_level",
+        ("load_cycle", "blocking"),
+    ),
+)
+
+#: name -> :class:`Effect`, every candidate the workflow screens.
+LIBRARY: MappingProxyType = MappingProxyType({e.name: e for e in _LIST})
+#: The DESIGN.md section 5 physics effects.
+PHYSICS_EFFECTS: tuple[str, ...] = tuple(e.name for e in _LIST if e.kind == "physics")
+#: Noise-side alternatives: never reported as physics.
+NOISE_EFFECTS: tuple[str, ...] = tuple(e.name for e in _LIST if e.kind == "noise")
+
+#: Pairs the rig's four tests cannot always tell apart, and the experiment that separates them
+#: (research/DISCREPANCY.md section 2). An ``ambiguous`` verdict names one of these.
+CONFUSABLE: MappingProxyType = MappingProxyType(
+    {
+        frozenset({"hysteresis", "viscoelastic_relaxation"}): "load cycles at two or more strain rates: "
+        "a viscoelastic loop grows with rate, a friction loop does not",
+        frozenset({"flow_restriction", "nonlinear_damping"}): "isometric (blocked) steps as well as free steps: "
+        "an inlet restriction delays the force of a blocked muscle, load damping does not",
+        frozenset({"series_compliance", "tensile_stiffness"}): "the same muscle on two mounts of different "
+        "stiffness: only the mount's share changes",
+        frozenset({"series_compliance", "sensor_gain"}): "a calibration weight on the load cell",
+        frozenset({"cyclic_softening", "viscoelastic_relaxation"}): "the first cycle repeated after a long rest: "
+        "softening that recovers is viscoelastic, softening that stays is damage",
+    }
+)
+
+
+def check_effects(names) -> tuple[str, ...]:
+    """Effect names in order, duplicates removed; an unknown name raises ``PeanoBayesInputError``."""
+    from ..errors import PeanoBayesInputError, did_you_mean
+
+    out = tuple(dict.fromkeys(names))
+    for name in out:
+        if name not in LIBRARY:
+            raise PeanoBayesInputError(
+                f"unknown effect {name!r}{did_you_mean(name, LIBRARY)}; known effects: {', '.join(LIBRARY)}"
+            )
+    return out
+
+
+__all__ = [
+    "CONFUSABLE",
+    "EXTRA_PARAMETERS",
+    "Effect",
+    "LIBRARY",
+    "NOISE_EFFECTS",
+    "OPEN_ORIFICE_M2",
+    "PHYSICS_EFFECTS",
+    "RIGID_TENSILE_N_PER_M",
+    "check_effects",
+    "parameter_spec",
+]

@@ -1,0 +1,238 @@
+"""Validation of discovery on virtual-rig data with a hidden effect (research/DISCREPANCY.md section 4).
+
+A :class:`Case` says what the rig hides: one library effect at a signal-to-noise ratio, none, two effects, or
+slow load-cell drift (an effect outside the library). :func:`hidden_dataset` simulates it; the label never
+reaches :func:`~peano_bayes.discovery.workflow.discover`, only :func:`score` sees it.
+
+**Truth:** Veale's elastic model (:data:`TRUTH_CONFIG`, the discovery base) at nominal parameters with an open
+inlet, on material PC's protocol (200 kPa), shortened (:data:`PROTOCOL`), one specimen, three repeats.
+``bending_stiffness`` and ``tensile_stiffness`` are part of every base (see
+:data:`~peano_bayes.discovery.model.DEFAULT_BASE`) and so cannot be hidden.
+
+**Signal-to-noise ratio:** for strength factor ``s`` of an effect's reference parameters
+(:data:`REFERENCE`), ``SNR = max over tests of RMS(y_with - y_without) / sigma_test`` from noise-free
+simulations at equal base parameters, with ``sigma_test`` the rig's per-sample noise of that test's signal.
+:func:`strength_for_snr` finds ``s`` by bisection in log ``s``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..data import Dataset
+from ..inference.likelihood import OBSERVED, SPECIMEN_SCALED
+from ..physics import ModelConfig
+from ..rig import RigNoise, RigProtocol, RigSimulationError, simulate_dataset
+from .effects import CONFUSABLE, OPEN_ORIFICE_M2, PHYSICS_EFFECTS
+
+MATERIAL = "PC"
+TRUTH_CONFIG = ModelConfig(bending=True, tensile=True, extension=False, friction="none")
+TRUTH_PARAMS = {**TRUTH_CONFIG.nominal_parameters(), "orifice_area_m2": OPEN_ORIFICE_M2}
+PROTOCOL = RigProtocol(
+    quasi_static_rate_hz=10.0,
+    cycle_duration_s=16.0,
+    ramp_duration_s=8.0,
+    step_rate_hz=250.0,
+    step_duration_s=0.3,
+    step_substeps=2,
+)
+REPEATS = 3
+#: Reference force noise [N] at which SNRs are calibrated; strain noise scales with it (2e-4 per 0.2 N).
+REFERENCE_FORCE_SD_N = 0.2
+#: Load-cell drift of the out-of-library case [N/s] (about 0.7 N over one specimen's session).
+DRIFT_N_PER_S = 0.005
+
+#: Effects the harness can hide: (quirks switched on, parameters at strength s).
+REFERENCE = {
+    "hysteresis": (
+        ("hysteresis",),
+        lambda s: {
+            "friction_force_n": 0.5 * s,
+            "friction_pressure_fraction": 0.05 * s,
+            "friction_stiffness_n_per_m": 2e4,
+        },
+    ),
+    "viscoelastic_relaxation": (
+        ("viscoelastic_relaxation",),
+        lambda s: {"parallel_maxwell1_k_n_per_m": 500.0 * s, "parallel_maxwell1_tau_s": 2.0},
+    ),
+    "series_compliance": (("series_compliance",), lambda s: {"mount_compliance_m_per_n": 1e-5 * s}),
+    "strain_stiffening": (("strain_stiffening",), lambda s: {"extension_k_n_per_m": 200.0 * s, "extension_rate": 50.0}),
+    "threshold_pressure": (("threshold_pressure",), lambda s: {"threshold_pressure_pa": 5e3 * s}),
+    "flow_restriction": ((), lambda s: {"orifice_area_m2": max(OPEN_ORIFICE_M2 / (1.0 + 10.0 * s), 1e-7)}),
+    "nonlinear_damping": (
+        ("nonlinear_damping",),
+        lambda s: {
+            "damping_up_ns_per_m": 20.0 * s,
+            "damping_down_ns_per_m": 5.0 * s,
+            "damping_quadratic_ns2_per_m2": 50.0 * s,
+        },
+    ),
+    "cyclic_softening": ((), lambda s: {"cyclic_softening_fraction": 0.1 * s}),
+}
+HIDEABLE: tuple[str, ...] = tuple(REFERENCE)
+NOT_HIDEABLE = tuple(e for e in PHYSICS_EFFECTS if e not in REFERENCE)
+
+
+@dataclass(frozen=True)
+class Case:
+    """What the rig hides. ``effects`` names (empty: none); ``snr`` of each; ``drift`` load-cell drift (out of
+    library); ``force_sd_n`` the load cell's noise [N]."""
+
+    effects: tuple[str, ...] = ()
+    snr: float = 0.0
+    drift: bool = False
+    force_sd_n: float = REFERENCE_FORCE_SD_N
+
+    @property
+    def label(self) -> str:
+        if self.drift:
+            return "drift"
+        return "+".join(self.effects) if self.effects else "none"
+
+
+def rig_noise(force_sd_n: float) -> RigNoise:
+    scale = force_sd_n / REFERENCE_FORCE_SD_N
+    return RigNoise(force_sd_n=force_sd_n, strain_sd=2e-4 * scale, force_drift_n_per_s=DRIFT_N_PER_S)
+
+
+def _simulate(params: dict, quirks: tuple, seed: int, noise: RigNoise, drift: bool, softening: float) -> Dataset:
+    kw = dict(
+        config=TRUTH_CONFIG,
+        quirks=quirks,
+        seed=seed,
+        noise=noise,
+        drift=drift,
+        specimens=1,
+        repeats=REPEATS,
+        protocol=PROTOCOL,
+    )
+    if softening == 0.0:
+        return simulate_dataset(MATERIAL, params, **kw)
+    # Cyclic softening: run n (its cycle index) of every condition has its wall stiffness scaled by 1 + a e^-n.
+    runs = []
+    for n in range(REPEATS):
+        factor = 1.0 + softening * math.exp(-n)
+        scaled = {k: v * factor if k in SPECIMEN_SCALED else v for k, v in params.items()}
+        ds = simulate_dataset(MATERIAL, scaled, **kw)
+        runs += [r for r in ds.runs if r.run % REPEATS == n]
+    order = {r.key: i for i, r in enumerate(simulate_dataset(MATERIAL, params, **kw).runs)}
+    return dataclasses.replace(ds, runs=tuple(sorted(runs, key=lambda r: order[r.key])))
+
+
+def _params_quirks(effects: tuple[str, ...], strengths: dict) -> tuple[dict, tuple, float]:
+    params, quirks, softening = dict(TRUTH_PARAMS), (), 0.0
+    for e in effects:
+        q, make = REFERENCE[e]
+        values = make(strengths[e])
+        softening = values.pop("cyclic_softening_fraction", softening)
+        params.update(values)
+        quirks += q
+    return params, quirks, softening
+
+
+def _snr(effect: str, s: float) -> float:
+    quiet = RigNoise(0.0, 0.0, 0.0, 0.0, 0.0)
+    without = _simulate(dict(TRUTH_PARAMS), (), 0, quiet, False, 0.0)
+    params, quirks, softening = _params_quirks((effect,), {effect: s})
+    with_ = _simulate(params, quirks, 0, quiet, False, softening)
+    noise = rig_noise(REFERENCE_FORCE_SD_N)
+    best = 0.0
+    for test in {r.test for r in without.runs}:
+        signal = OBSERVED[test][0]
+        sd = noise.force_sd_n if signal == "force_n" else noise.strain_sd
+        a = np.concatenate([getattr(r, signal) for r in with_.runs if r.test == test])
+        b = np.concatenate([getattr(r, signal) for r in without.runs if r.test == test])
+        best = max(best, float(np.sqrt(np.mean((a - b) ** 2))) / sd)
+    return best
+
+
+@functools.cache
+def strength_for_snr(effect: str, snr: float, iterations: int = 12) -> float:
+    """Strength factor ``s`` of ``effect`` whose SNR is ``snr`` (bisection in log s on [1e-3, 1e2])."""
+    lo, hi = math.log(1e-3), math.log(1e2)
+    for _ in range(iterations):
+        mid = 0.5 * (lo + hi)
+        try:
+            value = _snr(effect, math.exp(mid))
+        except RigSimulationError:  # a strength the physics solver cannot simulate counts as too strong
+            value = math.inf
+        lo, hi = (mid, hi) if value < snr else (lo, mid)
+    return math.exp(0.5 * (lo + hi))
+
+
+def hidden_dataset(case: Case, seed: int, strengths: dict | None = None) -> Dataset:
+    """The rig dataset of ``case`` (strengths by effect, default calibrated by :func:`strength_for_snr`)."""
+    strengths = strengths or {e: strength_for_snr(e, case.snr) for e in case.effects}
+    params, quirks, softening = _params_quirks(case.effects, strengths)
+    return _simulate(params, quirks, seed, rig_noise(case.force_sd_n), case.drift, softening)
+
+
+def outcome_label(report: dict) -> str:
+    """The confusion-matrix column of a discovery report."""
+    if report["verdict"] == "ambiguous":
+        return "ambiguous{" + ",".join(sorted(report["ambiguous"][0]["effects"])) + "}"
+    if report["verdict"] == "named":
+        return "+".join(sorted(report["named"]))
+    return report["verdict"]
+
+
+def score(case: Case, report: dict) -> dict:
+    """Whether ``report`` is right about ``case``: ``correct``, ``false_positive`` (a physics effect named when
+    none or only drift is hidden), and the held-out gap ratio of the worst test (after / before)."""
+    named = set(report["named"])
+    for a in report["ambiguous"]:
+        named |= set(a["effects"])
+    truth = set(case.effects)
+    if case.drift or not truth:
+        correct = report["verdict"] in (("none", "unexplained") if case.drift else ("none",))
+    elif report["verdict"] == "ambiguous":
+        sets = [frozenset(a["effects"]) for a in report["ambiguous"]]
+        correct = (
+            len(truth) == 1
+            and any(s in CONFUSABLE and truth <= s for s in sets)
+            and set(report["named"]) <= (truth | set().union(*sets))
+        )
+    else:
+        correct = set(report["named"]) == truth
+    before, after = report["gap"]["before"], report["gap"]["after"]
+    worst = max(before, key=lambda t: before[t]["held_out"]["standardized_rmse"])
+    ratio = after[worst]["held_out"]["rmse"] / before[worst]["held_out"]["rmse"]
+    return {
+        "label": case.label,
+        "outcome": outcome_label(report),
+        "correct": bool(correct),
+        "false_positive": bool((case.drift or not truth) and bool(named)),
+        "gap_test": worst,
+        "gap_ratio": float(ratio),
+    }
+
+
+def wilson(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    """Wilson score interval of a binomial proportion (95 % by default)."""
+    if n == 0:
+        return 0.0, 1.0
+    p = successes / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+__all__ = [
+    "Case",
+    "HIDEABLE",
+    "NOT_HIDEABLE",
+    "PROTOCOL",
+    "TRUTH_CONFIG",
+    "hidden_dataset",
+    "outcome_label",
+    "rig_noise",
+    "score",
+    "strength_for_snr",
+    "wilson",
+]

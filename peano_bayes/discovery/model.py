@@ -1,0 +1,202 @@
+"""The discovery model: one superset of every library effect, with inactive effects pinned to their ``off`` values.
+
+All candidate models are the superset :data:`SUPERSET_CONFIG` with a 0/1 mask over its parameters
+(research/DISCREPANCY.md section 3.1): a masked parameter takes its ``off`` (or ``hold``) value whatever the
+optimizer proposes, so one compiled function serves the base model and every candidate, and the data enter as
+arguments (a pytree), so it serves every dataset of the same shape too.
+
+Parameters are fitted on an unconstrained scale ``u``: ``log``-``logit`` between the bounds of positive
+parameters (a zero lower bound is replaced by ``1e-9`` times the upper), ``tanh`` between the bounds of signed
+ones.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..inference.likelihood import OBSERVED, SOLVER_TOLERANCE, SPECIMEN_OFFSET, RunGroup, predict
+from ..physics import Geometry, ModelConfig
+from .effects import EXTRA_PARAMETERS, LIBRARY, check_effects, parameter_spec
+
+#: Every element any library effect needs, switched on; inactive ones are pinned at their off values.
+SUPERSET_CONFIG = ModelConfig(
+    bending=True,
+    tensile=True,
+    extension=True,
+    mount=True,
+    parallel_maxwell=1,
+    series_kelvin=0,
+    friction="parallel",
+    threshold=True,
+    flow="orifice",
+    damping=True,
+)
+#: Parameter order of every vector in this package.
+NAMES: tuple[str, ...] = SUPERSET_CONFIG.parameter_names() + tuple(EXTRA_PARAMETERS)
+#: Free in every model: the effective length fraction of the contractile unit.
+ALWAYS_FREE = ("length_fraction",)
+#: The default base model: Veale's elastic model, the ideal Peano geometry with tensile compliance (without it
+#: the ideal model has an infinite blocking force, and a load cycle that stretches the muscle cannot be
+#: simulated) and bending stiffness (without it the step response's solver fails at an open inlet).
+DEFAULT_BASE = ("tensile_stiffness", "bending_stiffness")
+_ZERO_FLOOR = 1e-9
+FORCE_TESTS = frozenset(t for t, (signal, _) in OBSERVED.items() if signal == "force_n")
+
+
+def _bounds(name: str) -> tuple[float, float, bool]:
+    low, high = parameter_spec(name).bounds
+    signed = low < 0
+    if not signed and low == 0:
+        low = high * _ZERO_FLOOR
+    return low, high, signed
+
+
+_LOW, _HIGH, _SIGNED = (np.array(v) for v in zip(*(_bounds(n) for n in NAMES), strict=True))
+
+
+def to_values(u):
+    """Parameter values [SI] (..., d) from unconstrained ``u`` (..., d)."""
+    u = jnp.asarray(u)
+    s = jax.nn.sigmoid(u)
+    positive = jnp.exp(jnp.log(_LOW) + (jnp.log(_HIGH) - jnp.log(_LOW)) * s)
+    signed = 0.5 * (_LOW + _HIGH) + 0.5 * (_HIGH - _LOW) * jnp.tanh(u)
+    return jnp.where(_SIGNED, signed, positive)
+
+
+def to_unconstrained(values) -> np.ndarray:
+    """Inverse of :func:`to_values`; values are clipped just inside their bounds."""
+    x = np.clip(np.asarray(values, dtype=float), _LOW * (1 + 1e-9), _HIGH * (1 - 1e-9) + (_SIGNED * 2e-9 * _HIGH))
+    s = (np.log(np.abs(x)) - np.log(_LOW)) / (np.log(_HIGH) - np.log(_LOW))
+    s = np.clip(s, 1e-9, 1 - 1e-9)
+    positive = np.log(s / (1 - s))
+    t = np.clip((x - 0.5 * (_LOW + _HIGH)) / (0.5 * (_HIGH - _LOW)), -1 + 1e-9, 1 - 1e-9)
+    return np.where(_SIGNED, np.arctanh(t), positive)
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """A member of the superset family: which effects are active, and the values of every parameter."""
+
+    active: tuple[str, ...]
+    mask: np.ndarray  # (d,) bool, free parameters
+    pinned: np.ndarray  # (d,) values of the parameters that are not free
+
+    @property
+    def free_names(self) -> tuple[str, ...]:
+        return tuple(n for n, m in zip(NAMES, self.mask, strict=True) if m)
+
+
+def model_spec(active, base_values: dict | None = None) -> ModelSpec:
+    """The model with effects ``active`` on; parameters that are not free take their ``off`` / ``hold`` value
+    from the inactive effects, else ``base_values``, else nominal."""
+    active = check_effects(active)
+    free = set(ALWAYS_FREE)
+    for name in active:
+        free |= set(LIBRARY[name].params)
+    pinned = {n: parameter_spec(n).nominal for n in NAMES}
+    pinned.update(base_values or {})
+    for effect in LIBRARY.values():
+        if effect.name not in active:
+            pinned.update(effect.hold)
+            pinned.update(effect.off)
+    mask = np.array([n in free for n in NAMES])
+    return ModelSpec(active, mask, np.array([pinned[n] for n in NAMES], dtype=float))
+
+
+def values(u, mask, pinned):
+    """Parameter values (d,) of unconstrained ``u`` with the masked-out ones pinned."""
+    return jnp.where(mask, to_values(u), pinned)
+
+
+@dataclass(frozen=True, eq=False)
+class DiscoveryData:
+    """Binned runs of one specimen, as a pytree (one compiled model serves every dataset of the same shape).
+
+    **Fields:** ``groups`` run groups whose ``specimen_index`` is the run's cycle index (0 = first run of its
+    condition), ``sd`` per group (r, m) the noise sd of each bin mean [signal unit], ``geometry``.
+    """
+
+    groups: tuple[RunGroup, ...]
+    sd: tuple
+    n_cycles: int
+    geometry: Geometry
+
+
+jax.tree_util.register_dataclass(DiscoveryData, data_fields=["groups", "sd"], meta_fields=["n_cycles", "geometry"])
+
+
+def predictions(x, data: DiscoveryData):
+    """Per group: predicted signal (r, m), bin noise sd (r, m) and solver error (r,), at values ``x`` (d,)."""
+    params = dict(zip(NAMES, x, strict=True))
+    a = params.pop("cyclic_softening_fraction")
+    offset, gain = params.pop("sensor_offset_n"), params.pop("sensor_gain")
+    slope = params.pop("noise_slope_per_n")
+    params[SPECIMEN_OFFSET] = jnp.log1p(a * jnp.exp(-jnp.arange(data.n_cycles, dtype=float)))
+    out = []
+    for group, sd in zip(data.groups, data.sd, strict=True):
+        predicted, error = predict(params, group, config=SUPERSET_CONFIG, geometry=data.geometry)
+        if group.test in FORCE_TESTS:
+            predicted = gain * predicted + offset
+            sd = sd * (1.0 + slope * jnp.abs(predicted))
+        out.append((predicted, sd, error))
+    return out
+
+
+_LOG_2PI = math.log(2 * math.pi)
+
+
+def standardized(x, data: DiscoveryData):
+    """Flat standardized residuals (n,) (0 where unmeasured), ``log sd`` (n,) (0 where unmeasured), and the
+    largest solver error over all runs."""
+    rs, logs, errs = [], [], []
+    for group, (predicted, sd, error) in zip(data.groups, predictions(x, data), strict=True):
+        observed = jnp.asarray(group.observed)
+        measured = jnp.isfinite(observed)
+        rs.append(jnp.where(measured, (jnp.where(measured, observed, 0.0) - predicted) / sd, 0.0).ravel())
+        logs.append(jnp.where(measured, jnp.log(sd), 0.0).ravel())
+        errs.append(jnp.max(error / SOLVER_TOLERANCE[group.test]))
+    return jnp.concatenate(rs), jnp.concatenate(logs), jnp.max(jnp.stack(errs))
+
+
+def flat_predictions(x, data: DiscoveryData):
+    """Flat predicted signal (n,) and observed minus predicted (n,) [signal unit] (NaN where unmeasured)."""
+    pred = [p.ravel() for p, _, _ in predictions(x, data)]
+    obs = [jnp.asarray(g.observed).ravel() for g in data.groups]
+    predicted = jnp.concatenate(pred)
+    return predicted, jnp.concatenate(obs) - predicted
+
+
+def measured_mask(data: DiscoveryData) -> np.ndarray:
+    """(n,) which flat bins hold a measurement."""
+    return np.concatenate([np.isfinite(np.asarray(g.observed)).ravel() for g in data.groups])
+
+
+def pointwise_log_likelihood(x, data: DiscoveryData):
+    """Gaussian log-likelihood of every flat bin (n,) (0 where unmeasured)."""
+    r, log_sd, _ = standardized(x, data)
+    measured = jnp.concatenate([jnp.isfinite(jnp.asarray(g.observed)).ravel() for g in data.groups])
+    return jnp.where(measured, -0.5 * r**2 - log_sd - 0.5 * _LOG_2PI, 0.0)
+
+
+__all__ = [
+    "ALWAYS_FREE",
+    "DEFAULT_BASE",
+    "DiscoveryData",
+    "ModelSpec",
+    "NAMES",
+    "SUPERSET_CONFIG",
+    "flat_predictions",
+    "measured_mask",
+    "model_spec",
+    "pointwise_log_likelihood",
+    "predictions",
+    "standardized",
+    "to_unconstrained",
+    "to_values",
+    "values",
+]

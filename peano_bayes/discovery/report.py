@@ -1,0 +1,166 @@
+"""Discovery outputs: ``report.json``, ``report.md`` (for a materials engineer) and residual figures
+(``figures/residuals.png``/``.pdf``: base and final model residuals against each covariate)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import matplotlib.pyplot as plt
+import numpy as np
+
+from .. import plots
+from ..figures import save
+from ..inference.results import write_atomic_text
+from .effects import LIBRARY
+
+_UNIT = {"load_cycle": "N", "blocking": "N", "stroke": "-", "step": "-"}
+
+
+def _binned(x: np.ndarray, r: np.ndarray, bins: int = 12) -> tuple[np.ndarray, np.ndarray]:
+    ok = np.isfinite(x) & np.isfinite(r)
+    if ok.sum() < 2 or np.ptp(x[ok]) == 0:
+        return x[ok][:1], r[ok][:1]
+    edges = np.linspace(x[ok].min(), x[ok].max(), bins + 1)
+    index = np.clip(np.digitize(x[ok], edges) - 1, 0, bins - 1)
+    counts = np.bincount(index, minlength=bins)
+    keep = counts > 0
+    centres = 0.5 * (edges[1:] + edges[:-1])
+    return centres[keep], (np.bincount(index, weights=r[ok], minlength=bins) / np.maximum(counts, 1))[keep]
+
+
+def covariate_panels(result) -> list[dict]:
+    """Per covariate: ``x``, ``xlabel``, and ``before`` / ``after`` as ``(residuals, (centres, means))``, on the
+    bins where the covariate is defined."""
+    cov = result.split.fit_covariates
+    force = np.isin(cov.test, ("load_cycle", "blocking"))
+    step = cov.test == "step"
+    panels = [
+        ("pressure [kPa]", cov.pressure_pa / 1e3, np.ones_like(force)),
+        ("strain [%]", cov.strain * 100, np.ones_like(force)),
+        ("strain-rate sign (load cycles) [-]", cov.rate_sign, cov.test == "load_cycle"),
+        ("predicted force [N]", result.before.predicted, force),
+        ("time since the step [s]", np.nan_to_num(cov.time_since_step_s), step),
+        ("cycle index [-]", cov.cycle.astype(float), np.ones_like(force)),
+    ]
+    out = []
+    for label, x, where in panels:
+        where = where.astype(bool)
+        rb, ra = result.before.r[where], result.after.r[where]
+        out.append(
+            {
+                "x": x[where],
+                "xlabel": label,
+                "before": (rb, _binned(x[where], rb)),
+                "after": (ra, _binned(x[where], ra)),
+            }
+        )
+    return out
+
+
+def residual_figure(result, path_stem: Path) -> list[Path]:
+    """Residuals of the base and the final model against every covariate, one panel each."""
+    panels = covariate_panels(result)
+    with plt.rc_context(plots.STYLE):
+        fig, axes = plt.subplots(2, 3, figsize=(11, 6.5), constrained_layout=True)
+        for ax, panel in zip(axes.ravel(), panels, strict=True):
+            plots.residuals_against(ax, panel["x"], panel["before"], panel["after"], xlabel=panel["xlabel"])
+        axes[0, 0].legend(loc="best", markerscale=4)
+        final = "+".join(result.report["final_model"])
+        fig.suptitle(f"Residuals on the fitted runs: base model (red) and final model {final} (blue)")
+    return save(fig, path_stem)
+
+
+def _fmt(x) -> str:
+    return "n/a" if x is None or not np.isfinite(x) else f"{x:.3g}"
+
+
+def report_markdown(report: dict) -> str:
+    """The report in words a materials engineer reads."""
+    lines = [f"# Discovery report: specimen {report['specimen']}", ""]
+    verdict = report["verdict"]
+    if verdict == "named":
+        lines.append(f"**Verdict: the data show {', '.join(report['named'])}**, which the base model lacked.")
+    elif verdict == "ambiguous":
+        for a in report["ambiguous"]:
+            lines.append(
+                f"**Verdict: ambiguous** between {' and '.join(a['effects'])}: the data cannot tell them apart."
+            )
+            for rival, experiment in a["experiment"].items():
+                lines.append(f"- To separate them from {rival}: {experiment}.")
+    elif verdict == "unexplained":
+        lines.append(
+            "**Verdict: unexplained.** The residuals keep structure that no effect in the library explains "
+            "(every candidate failed a gate). Look at the residual figure for its shape; a sensor drift or an "
+            "effect outside the library are likely."
+        )
+    else:
+        lines.append("**Verdict: none.** No effect beyond the base model is supported by the data.")
+    if report["noise_model"]:
+        lines.append(f"\nThe sensor or noise model needed: {', '.join(report['noise_model'])} (not physics).")
+    lines += ["", f"Base model: {' + '.join(report['base'])}. Final model: {' + '.join(report['final_model'])}.", ""]
+    for i, step in enumerate(report["steps"], 1):
+        ev = step["evidence"]
+        lines += [
+            f"## Step {i}: added `{step['effect']}`",
+            "",
+            f"{step['meaning'].capitalize()}.",
+            "",
+            f"- Held-out runs: log-likelihood up by {ev['delta_elpd']:.1f} (standard error {ev['elpd_se']:.1f}); "
+            f"held-out RMSE x{ev['heldout_rmse_ratio']:.2f}.",
+            f"- BIC change {ev['delta_bic']:.1f} (effective sample size {ev['n_eff']:.0f}).",
+            f"- Its residual signature `{ev['signature']}` fell from {ev['signature_before']:.1f} to "
+            f"{ev['signature_after']:.1f} (noise-level units).",
+            "- Strength: "
+            + ", ".join(f"`{p}` = {_fmt(v['value'])} ± {_fmt(v['sd'])}" for p, v in step["parameters"].items())
+            + f" ({', '.join(f'{k} {z:.1f} sd from off' for k, z in ev['strength_z'].items())}).",
+        ]
+        if ev["weakly_identified"]:
+            lines.append(
+                f"- Weakly identified: correlation {ev['max_correlation_with_base']:.2f} with a base parameter."
+            )
+        if step["rivals"]:
+            lines.append(f"- Rivals within two standard errors: {', '.join(step['rivals'])}.")
+        lines.append("")
+    lines += [
+        "## Gap before and after",
+        "",
+        "| test | part | RMSE base | RMSE final | max error base | max error final | unit |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    before, after = report["gap"]["before"], report["gap"]["after"]
+    for test in before:
+        for part in ("fit", "held_out"):
+            b, a = before[test].get(part), after[test].get(part)
+            if b is None or a is None:
+                continue
+            lines.append(
+                f"| {test} | {part.replace('_', '-')} | {_fmt(b['rmse'])} | {_fmt(a['rmse'])} | "
+                f"{_fmt(b['max_error'])} | {_fmt(a['max_error'])} | {_UNIT.get(test, '')} |"
+            )
+    lines += ["", "## Candidates screened", ""]
+    for i, screened in enumerate(report["screened"], 1):
+        for name, ev in screened.items():
+            failed = [g for g, ok in ev["gates"].items() if not ok]
+            status = "passed every gate" if ev["passed"] else f"failed: {', '.join(failed)}"
+            lines.append(f"- round {i}, `{name}` ({LIBRARY[name].kind}): delta elpd {ev['delta_elpd']:.1f}; {status}")
+    lines += [
+        "",
+        "Held-out runs are the second repeat of every test condition; gates and thresholds: "
+        + ", ".join(f"{k} {v}" for k, v in report["gates"].items())
+        + ".",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def write_report(result, out: Path) -> list[Path]:
+    """Write ``report.json``, ``report.md`` and ``figures/residuals.{png,pdf}`` into ``out`` (each atomic)."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_atomic_text(out / "report.json", json.dumps(result.report, indent=1, default=float))
+    write_atomic_text(out / "report.md", report_markdown(result.report))
+    return [out / "report.json", out / "report.md", *residual_figure(result, out / "figures" / "residuals")]
+
+
+__all__ = ["covariate_panels", "report_markdown", "residual_figure", "write_report"]

@@ -1,0 +1,322 @@
+"""The discovery loop: fit the base model, diagnose residual structure, screen candidate effects, accept the
+best one only if it passes every gate, repeat (research/DISCREPANCY.md section 3).
+
+**Screening** (every iteration, whether or not the diagnosis flags structure): the candidates not yet in the
+model are ranked by the decrease of squared residuals one Gauss-Newton step promises from near their off
+values (a score statistic); the top :attr:`Gates.screen` are refitted (all parameters free, the new effect
+started near off) in one vmapped solve, plus the heteroscedastic noise option when its signature is
+significant.
+
+**Gates** (:class:`Gates`, frozen before the validation benchmark), all must pass:
+1. predictive gain on held-out runs: ``delta elpd >= min_delta_elpd`` and ``delta elpd / se >= min_elpd_z``,
+   with ``se`` from the per-block differences (a block is ten consecutive bins of one run);
+2. parsimony: ``delta BIC <= max_delta_bic``, the log-likelihood scaled by ``n_eff / n`` and the penalty using
+   ``n_eff = n (1 - rho1) / (1 + rho1)`` from the lag-1 autocorrelation of the residuals;
+3. the effect explains its own signature: ``T_after / T_before <= max_signature_ratio``;
+4. it is real: some strength parameter is more than ``strength_z`` Laplace sd from its off value (the 94 %
+   interval excludes off);
+5. it generalizes: held-out RMSE (standardized) ``<= max_heldout_ratio`` times the value before.
+A candidate strongly correlated with a base parameter (``|corr| > 0.95``) is flagged "weakly identified".
+
+**Verdicts:** the physics effects added (``named``); ``ambiguous`` when a rival passed every gate with an
+elpd within two standard errors of the winner (the rivals and, for pairs in
+:data:`~peano_bayes.discovery.effects.CONFUSABLE`, the experiment that separates them are reported);
+``unexplained`` when structure is left and no candidate passes; ``none`` otherwise. Noise-side effects that
+pass are added and reported as the noise model, never as physics.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from .data import SplitData
+from .diagnose import SQUARED, Diagnosis, diagnose, signature_statistic, signature_weights
+from .effects import CONFUSABLE, LIBRARY, check_effects
+from .fitting import Evaluation, ModelFit, evaluate, fit_models, gauss_newton_gain
+from .model import DEFAULT_BASE, NAMES, model_spec
+
+VERDICTS = ("named", "none", "ambiguous", "unexplained")
+#: Candidates ranked by their signature rather than by Gauss-Newton gain (a noise model lowers the residuals
+#: by widening the noise, which the gain does not penalize): refitted when their signature is significant.
+SCREENED_BY_SIGNATURE = frozenset({"heteroscedastic_noise"})
+
+
+@dataclass(frozen=True)
+class Gates:
+    """Acceptance thresholds (see the module docstring). Frozen before the validation benchmark ran."""
+
+    min_delta_elpd: float = 4.0
+    min_elpd_z: float = 1.0
+    max_delta_bic: float = -10.0
+    max_signature_ratio: float = 0.5
+    strength_z: float = 1.88
+    max_heldout_ratio: float = 0.98
+    alpha: float = 0.01
+    max_effects: int = 3
+    screen: int = 4
+    base_starts: int = 4
+    max_correlation: float = 0.95
+
+
+def _blocks(cov_block: np.ndarray, values: np.ndarray) -> np.ndarray:
+    index = np.unique(cov_block, return_inverse=True)[1]
+    return np.bincount(index, weights=values)
+
+
+def _n_eff(r: np.ndarray) -> float:
+    n = r.size
+    rho = float(np.corrcoef(r[:-1], r[1:])[0, 1]) if n > 2 and np.std(r) > 0 else 0.0
+    rho = min(max(rho, 0.0), 0.99)
+    return n * (1 - rho) / (1 + rho)
+
+
+def _rmse(a: np.ndarray) -> float:
+    a = a[np.isfinite(a)]
+    return float(np.sqrt(np.mean(a**2))) if a.size else float("nan")
+
+
+def gap_table(fit_eval: Evaluation, held_eval: Evaluation, split: SplitData) -> dict:
+    """Per test and split: RMSE and max |error| [signal unit], and the standardized RMSE (1 = noise level)."""
+    out = {}
+    for part, ev, cov in (("fit", fit_eval, split.fit_covariates), ("held_out", held_eval, split.held_out_covariates)):
+        for test in np.unique(cov.test):
+            rows = cov.test == test
+            err = ev.error[rows]
+            out.setdefault(str(test), {})[part] = {
+                "rmse": _rmse(err),
+                "max_error": float(np.nanmax(np.abs(err))),
+                "standardized_rmse": _rmse(ev.r[rows]),
+            }
+    return out
+
+
+@dataclass
+class _Candidate:
+    name: str
+    fit: ModelFit
+    fit_eval: Evaluation
+    held_eval: Evaluation
+    evidence: dict
+    passed: bool
+
+
+def _score(
+    name, fit, split, before: ModelFit, before_fit: Evaluation, before_held: Evaluation, gates, diag
+) -> _Candidate:
+    effect = LIBRARY[name]
+    fit_eval, held_eval = evaluate(fit, split.fit), evaluate(fit, split.held_out)
+    diff = held_eval.loglik - before_held.loglik
+    block_diff = _blocks(split.held_out_covariates.block, diff)
+    delta_elpd = float(diff.sum())
+    se = float(np.sqrt(block_diff.size) * np.std(block_diff, ddof=1)) if block_diff.size > 1 else float("inf")
+    n = fit_eval.r.size
+    n_eff = _n_eff(fit_eval.r)
+    delta_loglik = float(fit_eval.loglik.sum() - before_fit.loglik.sum())
+    delta_k = fit.n_free - before.n_free
+    delta_bic = -2.0 * (n_eff / n) * delta_loglik + delta_k * np.log(n_eff)
+    w = signature_weights(split.fit_covariates, before_fit.predicted)[effect.signature]
+    squared = effect.signature in SQUARED
+    t_before = diag.statistic[effect.signature]
+    t_after = signature_statistic(fit_eval.r, w, squared)
+    off = effect.off
+    z_strength = {p: abs(fit.params[p] - off[p]) / fit.sd[p] if fit.sd.get(p, 0) > 0 else 0.0 for p in effect.strength}
+    heldout_ratio = _rmse(held_eval.r) / _rmse(before_held.r)
+    free = fit.spec.free_names
+    new = [free.index(p) for p in effect.params if p in free]
+    old = [i for i, p in enumerate(free) if p not in effect.params]
+    correlation = float(np.max(np.abs(fit.correlation[np.ix_(new, old)]))) if new and old else 0.0
+    evidence = {
+        "delta_elpd": delta_elpd,
+        "elpd_se": se,
+        "delta_bic": float(delta_bic),
+        "n_eff": float(n_eff),
+        "signature": effect.signature,
+        "signature_before": float(t_before),
+        "signature_after": float(t_after),
+        "signature_ratio": float(t_after / t_before) if t_before > 0 else float("inf"),
+        "strength_z": {k: float(v) for k, v in z_strength.items()},
+        "heldout_rmse_ratio": float(heldout_ratio),
+        "max_correlation_with_base": correlation,
+        "weakly_identified": correlation > gates.max_correlation,
+        "solver_ok": fit_eval.solver_ok and held_eval.solver_ok,
+    }
+    checks = {
+        "predictive_gain": delta_elpd >= gates.min_delta_elpd and delta_elpd >= gates.min_elpd_z * se,
+        "parsimony": delta_bic <= gates.max_delta_bic,
+        "own_signature": evidence["signature_ratio"] <= gates.max_signature_ratio,
+        "strength_excludes_off": max(z_strength.values()) >= gates.strength_z,
+        "generalizes": heldout_ratio <= gates.max_heldout_ratio,
+        "solver_ok": evidence["solver_ok"],
+    }
+    evidence["gates"] = checks
+    return _Candidate(name, fit, fit_eval, held_eval, evidence, all(checks.values()))
+
+
+def _start(current: ModelFit, name: str) -> np.ndarray:
+    x = current.x.copy()
+    for p, v in LIBRARY[name].start.items():
+        x[NAMES.index(p)] = v
+    return x
+
+
+def _fit_base(base, split: SplitData, gates: Gates, seed: int) -> ModelFit:
+    spec = model_spec(base)
+    rng = np.random.default_rng(seed)
+    starts = [spec.pinned]
+    for _ in range(gates.base_starts - 1):
+        starts.append(spec.pinned * np.where(spec.mask, np.exp(rng.normal(0.0, 0.3, spec.mask.size)), 1.0))
+    starts = [np.where(spec.mask, s, spec.pinned) for s in starts]
+    for i, name in enumerate(NAMES):
+        if name == "length_fraction":
+            for s in starts:
+                s[i] = min(s[i], 0.95)
+    fits = [f for f in fit_models([spec] * len(starts), starts, split.fit) if f is not None]
+    if not fits:
+        raise RuntimeError(f"every fit of the base model {base} failed (non-finite or the physics solver missed)")
+    return min(fits, key=lambda f: f.cost)
+
+
+def _diagnosis_dict(d: Diagnosis) -> dict:
+    return {
+        "structure_left": d.structure_left,
+        "omnibus_p": d.omnibus_p,
+        "signatures": {k: {"T": d.statistic[k], "p": d.p_value[k], "p_holm": d.p_holm[k]} for k in d.statistic},
+    }
+
+
+@dataclass(frozen=True, eq=False)
+class Discovery:
+    """What :func:`discover` returns: the JSON-ready ``report``, the ``split`` data, and the base and final
+    models' :class:`~peano_bayes.discovery.fitting.Evaluation` on the fitted runs (``before``, ``after``)."""
+
+    report: dict
+    split: SplitData
+    before: Evaluation
+    after: Evaluation
+
+
+def discover(split: SplitData, *, base=DEFAULT_BASE, gates: Gates = Gates(), seed: int = 0, progress=None) -> Discovery:
+    """Run the discovery loop on ``split`` (see :func:`~peano_bayes.discovery.data.discovery_data`).
+
+    The report (:attr:`Discovery.report`) is a JSON-ready dict: ``verdict`` (one of :data:`VERDICTS`),
+    ``named`` physics effects, ``noise_model`` noise-side effects, ``ambiguous`` rival sets with the experiment
+    that separates them,
+    ``steps`` (per accepted effect: evidence, gates, parameters with Laplace sd, RMSE before and after),
+    ``screened`` (every candidate's evidence per iteration), ``gap`` (base vs final, fit and held-out),
+    ``diagnoses`` and timings.
+    """
+    say = progress or (lambda line: None)
+    started = time.perf_counter()
+    base = check_effects(base)
+    current = _fit_base(base, split, gates, seed)
+    base_fit = current
+    cur_fit, cur_held = evaluate(current, split.fit), evaluate(current, split.held_out)
+    first_fit, first_held = cur_fit, cur_held
+    say(
+        f"base model {'+'.join(base)} fitted: standardized RMSE fit {_rmse(cur_fit.r):.2f}, "
+        f"held-out {_rmse(cur_held.r):.2f}"
+    )
+    steps, screened, diagnoses = [], [], []
+    diag = diagnose(cur_fit.r, split.fit_covariates, cur_fit.predicted, alpha=gates.alpha, seed=seed)
+    diagnoses.append(_diagnosis_dict(diag))
+    stopped = "max_effects"
+    for iteration in range(gates.max_effects):
+        # Screen whether or not the diagnosis flags structure: the gates, not the diagnosis, decide.
+        inactive = [e for e in LIBRARY if e not in current.spec.active]
+        present = dict(zip(NAMES, current.x, strict=True))
+        specs = {e: model_spec(current.spec.active + (e,), present) for e in inactive}
+        gain = {
+            e: gauss_newton_gain(specs[e], _start(current, e), split.fit, float(np.sum(cur_fit.r**2)))
+            for e in inactive
+            if e not in SCREENED_BY_SIGNATURE
+        }
+        ranked = sorted(gain, key=lambda e: -gain[e])[: gates.screen]
+        ranked += [
+            e for e in inactive if e in SCREENED_BY_SIGNATURE and diag.p_holm[LIBRARY[e].signature] < gates.alpha
+        ]
+        say(
+            f"step {iteration + 1}: {'structure left' if diag.structure_left else 'no significant structure'}; "
+            f"refitting {', '.join(ranked)}"
+        )
+        fits = fit_models([specs[e] for e in ranked], [_start(current, e) for e in ranked], split.fit)
+        candidates = [
+            _score(e, f, split, current, cur_fit, cur_held, gates, diag)
+            for e, f in zip(ranked, fits, strict=True)
+            if f is not None
+        ]
+        screened.append({c.name: c.evidence | {"passed": c.passed} for c in candidates})
+        passing = [c for c in candidates if c.passed]
+        if not passing:
+            stopped = "no_candidate_passes" if diag.structure_left else "no_structure"
+            break
+        # Physics first: a noise model can mimic any misfit by widening the noise where residuals are large, so
+        # it is accepted only when no physics effect passes; rivals are of the winner's kind.
+        physics = [c for c in passing if LIBRARY[c.name].kind == "physics"]
+        pool = sorted(physics or passing, key=lambda c: -c.evidence["delta_elpd"])
+        best = pool[0]
+        rivals = []
+        for c in pool[1:]:
+            d = _blocks(split.held_out_covariates.block, best.held_eval.loglik - c.held_eval.loglik)
+            se = float(np.sqrt(d.size) * np.std(d, ddof=1)) if d.size > 1 else float("inf")
+            if d.sum() < 2.0 * se:
+                rivals.append(c.name)
+        step = {
+            "effect": best.name,
+            "kind": LIBRARY[best.name].kind,
+            "meaning": LIBRARY[best.name].meaning,
+            "rivals": rivals,
+            "experiment": {
+                r: CONFUSABLE.get(frozenset({best.name, r}), "no known discriminating test") for r in rivals
+            },
+            "evidence": best.evidence,
+            "parameters": {
+                p: {"value": best.fit.params[p], "sd": best.fit.sd.get(p)} for p in LIBRARY[best.name].params
+            },
+            "gap_before": gap_table(cur_fit, cur_held, split),
+            "gap_after": gap_table(best.fit_eval, best.held_eval, split),
+        }
+        steps.append(step)
+        say(
+            f"step {iteration + 1}: accepted {best.name} (delta elpd {best.evidence['delta_elpd']:.1f})"
+            + (f"; rivals within 2 se: {', '.join(rivals)}" if rivals else "")
+        )
+        current, cur_fit, cur_held = best.fit, best.fit_eval, best.held_eval
+        diag = diagnose(cur_fit.r, split.fit_covariates, cur_fit.predicted, alpha=gates.alpha, seed=seed)
+        diagnoses.append(_diagnosis_dict(diag))
+    named = [s["effect"] for s in steps if s["kind"] == "physics"]
+    ambiguous = [{"effects": [s["effect"], *s["rivals"]], "experiment": s["experiment"]} for s in steps if s["rivals"]]
+    if ambiguous:
+        verdict = "ambiguous"
+    elif named:
+        verdict = "named"
+    elif diag.structure_left:
+        verdict = "unexplained"
+    else:
+        verdict = "none"
+    report = {
+        "verdict": verdict,
+        "named": named,
+        "noise_model": [s["effect"] for s in steps if s["kind"] == "noise"],
+        "ambiguous": ambiguous,
+        "structure_left": diag.structure_left,
+        "stopped": stopped,
+        "base": list(base),
+        "final_model": list(current.spec.active),
+        "specimen": split.specimen,
+        "noise_sd": split.noise_sd,
+        "steps": steps,
+        "screened": screened,
+        "diagnoses": diagnoses,
+        "gap": {"before": gap_table(first_fit, first_held, split), "after": gap_table(cur_fit, cur_held, split)},
+        "base_parameters": {p: base_fit.params[p] for p in base_fit.spec.free_names},
+        "final_parameters": {p: {"value": current.params[p], "sd": current.sd.get(p)} for p in current.spec.free_names},
+        "gates": asdict(gates),
+        "seconds": time.perf_counter() - started,
+    }
+    return Discovery(report, split, first_fit, cur_fit)
+
+
+__all__ = ["Discovery", "Gates", "VERDICTS", "discover", "gap_table"]

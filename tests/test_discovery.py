@@ -1,0 +1,189 @@
+"""Discrepancy workflow (issue 6): effect library, nesting, residual tests, the `discover` command, and a small
+version of the hidden-effect validation (experiments/discrepancy_benchmark.py runs the full one).
+
+Seeds 100-199 are the tests' (the benchmark uses 1000 on, tuning used 0-9). Every run of the superset model
+shares one compilation per data shape, so the slow tests share one dataset shape.
+"""
+
+from __future__ import annotations
+
+import json
+
+import jax
+import numpy as np
+import pytest
+
+from peano_bayes.cli import main
+from peano_bayes.data import save
+from peano_bayes.discovery import LIBRARY, discover, discovery_data
+from peano_bayes.discovery.diagnose import diagnose, signature_statistic
+from peano_bayes.discovery.effects import CONFUSABLE, NOISE_EFFECTS, PHYSICS_EFFECTS
+from peano_bayes.discovery.harness import TRUTH_CONFIG, TRUTH_PARAMS, Case, hidden_dataset, score, wilson
+from peano_bayes.discovery.model import NAMES, SUPERSET_CONFIG, model_spec, to_unconstrained, to_values
+from peano_bayes.inference.likelihood import predict
+
+DESIGN_EFFECTS = (
+    "hysteresis",
+    "viscoelastic_relaxation",
+    "series_compliance",
+    "bending_stiffness",
+    "tensile_stiffness",
+    "strain_stiffening",
+    "threshold_pressure",
+    "flow_restriction",
+    "nonlinear_damping",
+    "cyclic_softening",
+)
+
+
+def test_library_has_every_design_effect_and_noise_alternatives():
+    assert set(DESIGN_EFFECTS) == set(PHYSICS_EFFECTS)
+    assert {"sensor_offset", "sensor_gain", "heteroscedastic_noise"} <= set(NOISE_EFFECTS)
+    for effect in LIBRARY.values():
+        assert set(effect.off) <= set(effect.params), effect.name
+        assert set(effect.strength) <= set(effect.off), effect.name
+        assert set(effect.start) <= set(effect.params), effect.name
+    for pair in CONFUSABLE:
+        assert pair <= set(LIBRARY)
+
+
+def test_unconstrained_round_trip():
+    x = np.array(
+        [
+            0.5 * (a + b)
+            for a, b in (
+                (0.31, 0.99) if n == "length_fraction" else (0.4, 0.6) if n == "sensor_gain" else (1e-3, 1.0)
+                for n in NAMES
+            )
+        ]
+    )
+    np.testing.assert_allclose(np.asarray(to_values(to_unconstrained(x))), x, rtol=1e-9)
+
+
+def test_model_spec_pins_inactive_effects_at_off():
+    spec = model_spec(("tensile_stiffness", "bending_stiffness"))
+    pinned = dict(zip(NAMES, spec.pinned, strict=True))
+    assert pinned["friction_force_n"] == 0.0 and pinned["mount_compliance_m_per_n"] == 0.0
+    assert pinned["sensor_gain"] == 1.0
+    assert set(spec.free_names) == {
+        "length_fraction",
+        *LIBRARY["tensile_stiffness"].params,
+        *LIBRARY["bending_stiffness"].params,
+    }
+
+
+@pytest.fixture(scope="module")
+def hysteresis_data():
+    return hidden_dataset(Case(("hysteresis",), 4.0), seed=100)
+
+
+def test_superset_at_off_equals_the_model_without_the_elements(hysteresis_data):
+    """Nesting: every effect at its off value changes no prediction (the inlet's off value is its largest area,
+    whose pressure drop is below the sensors' noise)."""
+    split = discovery_data(hidden_dataset(Case(), seed=101))
+    spec = model_spec(("tensile_stiffness", "bending_stiffness"), TRUTH_PARAMS)
+    params = dict(zip(NAMES, spec.pinned, strict=True))
+    for name in ("cyclic_softening_fraction", "sensor_offset_n", "sensor_gain", "noise_slope_per_n"):
+        params.pop(name)
+    for group in split.fit.groups:
+        if group.test not in ("load_cycle", "step"):
+            continue
+        group = type(group)(**{**group.__dict__, "specimen_index": np.zeros_like(group.specimen_index)})
+        plain = {k: v for k, v in params.items() if k in TRUTH_CONFIG.parameter_names()}
+        superset, _ = jax.jit(lambda p, g: predict(p, g, config=SUPERSET_CONFIG))(params, group)
+        ideal, _ = jax.jit(lambda p, g: predict(p, g, config=TRUTH_CONFIG))(plain, group)
+        tolerance = 1e-9 if group.test == "load_cycle" else 1e-6  # N / strain
+        np.testing.assert_allclose(np.asarray(superset), np.asarray(ideal), atol=tolerance, err_msg=group.test)
+
+
+def test_signature_test_respects_block_structure():
+    """White residuals: no signature is significant; a loading/unloading split is found; correlated noise
+    inside blocks does not fool the block test where an i.i.d. z-test would be fooled."""
+    from peano_bayes.discovery.data import Covariates
+
+    rng = np.random.default_rng(102)
+    n = 400
+    cov = Covariates(
+        test=np.array(["load_cycle"] * n),
+        run=np.repeat(np.arange(4), 100),
+        block=np.arange(n) // 10,
+        cycle=np.repeat([0, 2, 0, 2], 100),
+        pressure_pa=np.full(n, 2e5),
+        strain=np.tile(np.concatenate([np.linspace(0.1, -0.01, 50), np.linspace(-0.01, 0.1, 50)]), 4),
+        rate_sign=np.tile(np.repeat([-1.0, 1.0], 50), 4),
+        time_since_step_s=np.full(n, np.nan),
+        session_s=np.arange(n, dtype=float),
+    )
+    predicted = np.linspace(0, 30, n)
+    white = diagnose(rng.normal(size=n), cov, predicted, seed=102)
+    assert not white.structure_left
+    split = diagnose(rng.normal(size=n) + 0.5 * cov.rate_sign, cov, predicted, seed=102)
+    assert split.p_holm["loading_split"] < 0.01
+    # Noise constant within blocks (strong correlation in time), no structure: the block sign-flip test keeps
+    # its level, the i.i.d. z-score rejects about half the time.
+    w = cov.rate_sign / np.sqrt(n)
+    block_rejects = naive_rejects = 0
+    for rep in range(100):
+        blocky = np.repeat(rng.normal(size=n // 10), 10)
+        block_rejects += diagnose(blocky, cov, predicted, seed=rep).p_value["loading_split"] < 0.05
+        naive_rejects += signature_statistic(blocky, w) > 1.96
+    assert block_rejects <= 12  # Binomial(100, 0.05) exceeds 12 with probability 0.002
+    assert naive_rejects >= 30
+
+
+def test_wilson_interval_known_values():
+    low, high = wilson(0, 10)
+    assert low == 0.0 and high == pytest.approx(0.2775, abs=1e-4)
+    low, high = wilson(10, 10)
+    assert low == pytest.approx(0.7225, abs=1e-4) and high == 1.0
+
+
+def test_discover_cli_names_hidden_hysteresis_and_shrinks_the_gap(hysteresis_data, tmp_path, capsys):
+    csv = save(hysteresis_data, tmp_path / "hidden")
+    assert main(["discover", str(csv), "--out", str(tmp_path / "out"), "--json"]) == 0
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    report = json.loads(last)
+    assert report == json.loads((tmp_path / "out" / "report.json").read_text())
+    assert report["verdict"] == "named" and report["named"] == ["hysteresis"]
+    assert (tmp_path / "out" / "report.md").read_text().count("hysteresis") >= 2
+    assert (tmp_path / "out" / "figures" / "residuals.png").stat().st_size > 10_000
+    before = report["gap"]["before"]["load_cycle"]["held_out"]["rmse"]
+    after = report["gap"]["after"]["load_cycle"]["held_out"]["rmse"]
+    assert after <= 0.5 * before
+
+
+def test_discover_cli_bad_input_exits_2(tmp_path, capsys):
+    assert main(["discover", str(tmp_path / "missing.csv"), "--out", str(tmp_path / "o")]) == 2
+    assert main(["discover", str(tmp_path / "missing.csv"), "--out", str(tmp_path / "o"), "--base", "hysterisis"]) == 2
+    err = capsys.readouterr().err
+    assert "did you mean 'hysteresis'" in err
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.slow
+def test_hidden_effect_validation_small():
+    """Five seeds per case. With five runs a Wilson bound cannot prove recall >= 0.7 (5 of 5 gives a lower
+    bound of 0.57), so this asserts the targets are not contradicted: Wilson upper bound of recall >= 0.7 at
+    SNR 4, Wilson lower bound of the false-positive rate <= 0.15, drift reported as unexplained or none with
+    Wilson upper bound >= 0.8; and held-out RMSE after <= 0.5 x before on correct detections."""
+    seeds = range(110, 115)
+    cases = [
+        Case(),
+        Case(("hysteresis",), 4.0),
+        Case(("flow_restriction",), 4.0),
+        Case(("series_compliance",), 4.0),
+        Case(drift=True),
+    ]
+    rows = []
+    for case in cases:
+        for seed in seeds:
+            result = discover(discovery_data(hidden_dataset(case, seed)), seed=seed)
+            rows.append((case, score(case, result.report)))
+    for case in cases[1:4]:
+        hits = sum(r["correct"] for c, r in rows if c == case)
+        assert wilson(hits, 5)[1] >= 0.7, (case.label, [r["outcome"] for c, r in rows if c == case])
+        assert all(r["gap_ratio"] <= 0.5 for c, r in rows if c == case and r["correct"])
+    false_positives = sum(r["false_positive"] for c, r in rows if c == cases[0])
+    assert wilson(false_positives, 5)[0] <= 0.15
+    drift_ok = sum(r["correct"] for c, r in rows if c == cases[4])
+    assert wilson(drift_ok, 5)[1] >= 0.8
