@@ -5,7 +5,7 @@ effect at several noise levels (false positives); slow load-cell drift (outside 
 once. ``--seeds`` seeds per case, starting at ``--first-seed`` (default 1000: the tuning used seeds 0-9 and the
 tests use seeds 100-199). The label never reaches ``discover``.
 
-Resumable: every finished run is one line of ``OUT/runs.jsonl``; a rerun skips what is there. Writes
+Resumable: every finished run is one line of ``OUT/runs-<worker>.jsonl``; a rerun skips what is there. Writes
 ``OUT/confusion.csv``, ``OUT/recall.csv``, ``OUT/false_positives.csv``, ``OUT/gap.csv``, ``OUT/BENCHMARK.md``
 and prints one JSON object as its last line.
 
@@ -17,9 +17,10 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import subprocess
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -68,59 +69,91 @@ def _one(case: Case, seed: int, strengths: dict) -> dict:
     return row
 
 
-def run(out: Path, snrs, noise_levels, seeds: int, first_seed: int, jobs: int) -> list[dict]:
-    out.mkdir(parents=True, exist_ok=True)
-    log = out / "runs.jsonl"
-    done = {}
-    if log.exists():
-        for line in log.read_text().splitlines():
-            if line.strip():
-                row = json.loads(line)
-                done[row["key"]] = row
-    strengths_path = out / "strengths.json"
-    strengths = json.loads(strengths_path.read_text()) if strengths_path.exists() else {}
-    todo = []
-    for case in cases(snrs, noise_levels):
+def _calibrate(out: Path, all_cases) -> dict:
+    path = out / "strengths.json"
+    strengths = json.loads(path.read_text()) if path.exists() else {}
+    for case in all_cases:
         for e in case.effects:
             name = f"{e}@{case.snr:g}"
             if name not in strengths:
                 strengths[name] = strength_for_snr(e, case.snr)
                 print(f"calibrated {name}: strength factor {strengths[name]:.4g}", flush=True)
-                tmp = strengths_path.with_suffix(".tmp")
+                tmp = path.with_suffix(".tmp")
                 tmp.write_text(json.dumps(strengths, indent=1))
-                os.replace(tmp, strengths_path)
-        todo += [(case, s) for s in range(first_seed, first_seed + seeds) if key(case, s) not in done]
-    print(f"{len(done)} runs done, {len(todo)} to go", flush=True)
-    by_case = lambda case: {e: strengths[f"{e}@{case.snr:g}"] for e in case.effects}  # noqa: E731
-    with open(log, "a") as fh, ProcessPoolExecutor(max_workers=jobs) as pool:
-        futures = {pool.submit(_one, case, seed, by_case(case)): (case, seed) for case, seed in todo}
-        for i, future in enumerate(as_completed(futures), 1):
-            case, seed = futures[future]
+                os.replace(tmp, path)
+    return strengths
+
+
+def _read_rows(out: Path) -> dict:
+    done = {}
+    for log in sorted(out.glob("runs*.jsonl")):
+        for line in log.read_text().splitlines():
+            if line.strip():
+                row = json.loads(line)
+                done[row["key"]] = row
+    return done
+
+
+def _todo(out: Path, snrs, noise_levels, seeds: int, first_seed: int) -> list[tuple[Case, int]]:
+    done = _read_rows(out)
+    return [
+        (case, s)
+        for case in cases(snrs, noise_levels)
+        for s in range(first_seed, first_seed + seeds)
+        if key(case, s) not in done
+    ]
+
+
+def work(out: Path, snrs, noise_levels, seeds: int, first_seed: int, index: int, count: int) -> None:
+    """Worker ``index`` of ``count``: the runs not done yet whose key's CRC-32 is ``index`` mod ``count``, each
+    appended to ``OUT/runs-<index>.jsonl`` as it finishes."""
+    strengths = json.loads((out / "strengths.json").read_text())
+    todo = [
+        (c, s)
+        for c, s in _todo(out, snrs, noise_levels, seeds, first_seed)
+        if zlib.crc32(key(c, s).encode()) % count == index
+    ]
+    with open(out / f"runs-{index}.jsonl", "a") as fh:
+        for i, (case, seed) in enumerate(todo, 1):
+            by_case = {e: strengths[f"{e}@{case.snr:g}"] for e in case.effects}
             try:
-                row = future.result()
+                row = _one(case, seed, by_case)
             except Exception as err:  # recorded, not hidden: a failed run counts as wrong
                 row = {
-                    "key": key(case, seed),
-                    "label": case.label,
-                    "snr": case.snr,
-                    "force_sd_n": case.force_sd_n,
-                    "drift": case.drift,
-                    "seed": seed,
-                    "outcome": f"error: {type(err).__name__}: {err}"[:200],
-                    "correct": False,
-                    "false_positive": False,
-                    "gap_ratio": float("nan"),
+                    "key": key(case, seed), "label": case.label, "snr": case.snr, "force_sd_n": case.force_sd_n,
+                    "drift": case.drift, "seed": seed, "outcome": f"error: {type(err).__name__}: {err}"[:200],
+                    "correct": False, "false_positive": False, "gap_ratio": float("nan"),
                     "effects": list(case.effects),
-                }
+                }  # fmt: skip
             fh.write(json.dumps(row) + "\n")
             fh.flush()
-            done[row["key"]] = row
             print(
-                f"[{i}/{len(todo)}] {row['label']} snr {row['snr']:g} seed {seed}: {row['outcome']} "
-                f"({'right' if row['correct'] else 'WRONG'})",
+                f"worker {index} [{i}/{len(todo)}] {row['label']} snr {row['snr']:g} seed {seed}: "
+                f"{row['outcome']} ({'right' if row['correct'] else 'WRONG'})",
                 flush=True,
             )
-    return list(done.values())
+
+
+def run(out: Path, snrs, noise_levels, seeds: int, first_seed: int, jobs: int) -> list[dict]:
+    """Calibrate the strengths, then run the to-do list in ``jobs`` worker processes (one compilation each; the
+    second starts after the first has filled the on-disk compilation cache)."""
+    out.mkdir(parents=True, exist_ok=True)
+    _calibrate(out, cases(snrs, noise_levels))
+    todo = _todo(out, snrs, noise_levels, seeds, first_seed)
+    print(f"{len(_read_rows(out))} runs done, {len(todo)} to go", flush=True)
+    common = [sys.executable, __file__, "--out", str(out), "--seeds", str(seeds), "--first-seed", str(first_seed),
+              "--snr", *map(str, snrs), "--noise", *map(str, noise_levels)]  # fmt: skip
+    procs = []
+    for index in range(min(jobs, max(len(todo), 1))):
+        procs.append(subprocess.Popen(common + ["--worker", str(index), str(jobs)]))
+        if index == 0 and jobs > 1:
+            log = out / "runs-0.jsonl"
+            size = log.stat().st_size if log.exists() else 0
+            while procs[0].poll() is None and (not log.exists() or log.stat().st_size == size):
+                time.sleep(5)
+    for proc in procs:
+        proc.wait()
+    return list(_read_rows(out).values())
 
 
 def analyse(rows: list[dict], out: Path) -> dict:
@@ -207,12 +240,16 @@ def main(argv=None) -> int:
     parser.add_argument("--seeds", type=int, default=20, help="seeds per case")
     parser.add_argument("--first-seed", type=int, default=1000)
     parser.add_argument("--jobs", type=int, default=2)
-    parser.add_argument("--analyse-only", action="store_true", help="only rebuild the tables from runs.jsonl")
+    parser.add_argument("--analyse-only", action="store_true", help="only rebuild the tables from runs*.jsonl")
+    parser.add_argument("--worker", type=int, nargs=2, metavar=("INDEX", "COUNT"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     enable_compilation_cache()
     out = Path(args.out)
+    if args.worker:
+        work(out, args.snr, args.noise, args.seeds, args.first_seed, *args.worker)
+        return 0
     if args.analyse_only:
-        rows = [json.loads(line) for line in (out / "runs.jsonl").read_text().splitlines() if line.strip()]
+        rows = list(_read_rows(out).values())
     else:
         rows = run(out, args.snr, args.noise, args.seeds, args.first_seed, args.jobs)
     figures = analyse(rows, out)

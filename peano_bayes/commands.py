@@ -382,16 +382,20 @@ recommend_command.arguments = _recommend_arguments
 @command("discover", "find, name and add the effect the base model misses; report the gap before and after")
 def discover_command(args):
     from .data import load
-    from .discovery import DEFAULT_BASE, discover, discovery_data, write_report
+    from .discovery import DEFAULT_BASE, Gates, discover, discovery_data, write_report
     from .discovery.effects import check_effects
+    from .errors import PeanoBayesInputError
 
     base = check_effects(args.base.split(",")) if args.base else DEFAULT_BASE
+    if args.max_effects < 1:
+        raise PeanoBayesInputError(f"--max-effects must be >= 1, got {args.max_effects}")
     dataset = load(args.data)  # validate before anything is written
-    split = discovery_data(dataset, specimen=args.specimen)
+    split = discovery_data(dataset, specimen=args.specimen, tests=args.tests)
     say = (lambda line: None) if args.json else (lambda line: print(line, flush=True))
     say(f"{len(split.fit_runs)} fitted and {len(split.held_out_runs)} held-out runs of specimen {split.specimen} "
         "(the first fit compiles the model: a few minutes)")
-    result = discover(split, base=base, seed=args.seed, progress=say)
+    gates = Gates(max_effects=args.max_effects)
+    result = discover(split, base=base, gates=gates, seed=args.seed, progress=say)
     written = write_report(result, Path(args.out))
     report = result.report
     say(f"verdict: {report['verdict']}" + (f" ({', '.join(report['named'])})" if report["named"] else ""))
@@ -409,6 +413,11 @@ def _discover_arguments(p):
         help="comma-separated effects already in the base model (default: tensile_stiffness,bending_stiffness)",
     )
     p.add_argument("--specimen", default=None, help="specimen to analyse (default: the first in the file)")
+    p.add_argument(
+        "--tests", nargs="+", default=None, choices=("load_cycle", "blocking", "stroke", "step"),
+        help="tests to use (default: all in the file; a 1 kHz step response is the costly one)",
+    )
+    p.add_argument("--max-effects", type=int, default=3, help="most effects to add (default: 3)")
     p.add_argument("--seed", type=int, default=0, help="seed of the base fit's extra starts and the block tests")
 
 

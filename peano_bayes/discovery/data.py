@@ -60,7 +60,8 @@ class Covariates:
 @dataclass(frozen=True, eq=False)
 class SplitData:
     """What :func:`discovery_data` returns: ``fit`` and ``held_out`` data, their covariates, the noise sd per
-    test [per raw sample], the specimen analysed and the run keys of each part."""
+    test [per raw sample], the specimen analysed and the run keys of each part. ``both`` holds the fit groups
+    then the held-out groups (one evaluation, one compilation, for both parts)."""
 
     fit: DiscoveryData
     held_out: DiscoveryData
@@ -70,6 +71,14 @@ class SplitData:
     specimen: str
     fit_runs: tuple
     held_out_runs: tuple
+
+    @property
+    def both(self) -> DiscoveryData:
+        return replace(self.fit, groups=self.fit.groups + self.held_out.groups, sd=self.fit.sd + self.held_out.sd)
+
+    @property
+    def n_fit_bins(self) -> int:
+        return int(sum(g.observed.size for g in self.fit.groups))
 
 
 def _cycle_indices(dataset: Dataset, specimen: str) -> dict:
@@ -178,17 +187,27 @@ def _average_repeat_inputs(group: RunGroup, cycles: dict) -> RunGroup:
     return replace(group, **out)
 
 
-def discovery_data(dataset: Dataset, *, specimen: str | None = None, bin_sizes=DISCOVERY_BIN_SIZES) -> SplitData:
-    """Bin ``specimen``'s runs (default: the first specimen), split them (see the module docstring), estimate the
-    noise and collect covariates. Raises :class:`PeanoBayesInputError` for an unknown specimen or when no
-    condition has a second run to hold out."""
+def discovery_data(
+    dataset: Dataset, *, specimen: str | None = None, tests=None, bin_sizes=DISCOVERY_BIN_SIZES
+) -> SplitData:
+    """Bin ``specimen``'s runs (default: the first specimen) of ``tests`` (default: all), split them (see the
+    module docstring), estimate the noise and collect covariates. Raises :class:`PeanoBayesInputError` for an
+    unknown specimen or test, or when no condition has a second run to hold out."""
     specimens = tuple(dataset.specimens)
     specimen = specimens[0] if specimen is None else specimen
     if specimen not in specimens:
         raise PeanoBayesInputError(f"specimen {specimen!r} is not in the dataset; it has {', '.join(specimens)}")
-    runs = [run for run in dataset.runs if run.specimen == specimen]
+    present = {run.test for run in dataset.runs if run.specimen == specimen}
+    tests = tuple(present) if tests is None else tuple(tests)
+    missing = [t for t in tests if t not in present]
+    if missing:
+        raise PeanoBayesInputError(
+            f"test(s) {', '.join(missing)} not in the data of specimen {specimen!r}; "
+            f"it has {', '.join(sorted(present))}"
+        )
+    runs = [run for run in dataset.runs if run.specimen == specimen and run.test in tests]
     one = replace(dataset, runs=tuple(runs))
-    cycles = _cycle_indices(dataset, specimen)
+    cycles = _cycle_indices(one, specimen)
     if not any(size >= 2 for _, size in cycles.values()):
         raise PeanoBayesInputError(
             f"specimen {specimen!r} has no test condition with two or more runs; discovery holds out a repeat "

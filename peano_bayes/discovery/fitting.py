@@ -65,7 +65,13 @@ def _solve(starts, masks, pinned, data: DiscoveryData):
 
 @jax.jit
 def _jacobian(u, mask, pinned, data: DiscoveryData):
-    return jax.jacfwd(lambda v: _objective(v, data, mask, pinned, u)[0])(u)
+    """Jacobian of the objective's residual vector at ``u``, and that vector."""
+
+    def residuals(v):
+        res = _objective(v, data, mask, pinned, u)[0]
+        return res, res
+
+    return jax.jacfwd(residuals, has_aux=True)(u)
 
 
 @jax.jit
@@ -102,7 +108,7 @@ class ModelFit:
 
 
 def _laplace(u, spec: ModelSpec, data: DiscoveryData) -> tuple[dict, np.ndarray]:
-    jac = np.asarray(_jacobian(jnp.asarray(u), jnp.asarray(spec.mask), jnp.asarray(spec.pinned), data))
+    jac = np.asarray(_jacobian(jnp.asarray(u), jnp.asarray(spec.mask), jnp.asarray(spec.pinned), data)[0])
     free = np.flatnonzero(spec.mask)
     j = jac[:, free]
     cov_u = np.linalg.pinv(j.T @ j)
@@ -153,10 +159,9 @@ def gauss_newton_gain(spec: ModelSpec, start, data: DiscoveryData, current_cost:
     promises: ``current_cost - (|r|^2 - |P r|^2)`` with ``r`` the residuals at ``start`` and ``P`` the projection
     onto the span of the free parameters' Jacobian columns (a score statistic, used to rank candidates)."""
     u = to_unconstrained(start)
-    x = values(jnp.asarray(u), spec.mask, spec.pinned)
-    _, r, _, _, _ = _pointwise(x, data)
-    r = np.asarray(r)
-    jac = np.asarray(_jacobian(jnp.asarray(u), jnp.asarray(spec.mask), jnp.asarray(spec.pinned), data))
+    jac, res = _jacobian(jnp.asarray(u), jnp.asarray(spec.mask), jnp.asarray(spec.pinned), data)
+    n = sum(g.observed.size for g in data.groups)
+    jac, r = np.asarray(jac), np.asarray(res)[:n]
     j = jac[: r.size, spec.mask]
     if not (np.all(np.isfinite(j)) and np.all(np.isfinite(r))):
         return -np.inf
@@ -164,10 +169,12 @@ def gauss_newton_gain(spec: ModelSpec, start, data: DiscoveryData, current_cost:
     return float(current_cost - (np.sum(r**2) - np.sum((j @ step) ** 2)))
 
 
-def evaluate(fit: ModelFit, data: DiscoveryData) -> Evaluation:
-    """Evaluate ``fit`` on ``data`` (fit or held-out runs)."""
-    loglik, r, solver_error, predicted, error = (np.asarray(a) for a in _pointwise(jnp.asarray(fit.x), data))
-    return Evaluation(loglik, r, predicted, error, bool(solver_error <= 1.0))
+def evaluate(fit: ModelFit, split) -> tuple[Evaluation, Evaluation]:
+    """Evaluate ``fit`` on the fitted and on the held-out runs of a :class:`~.data.SplitData`."""
+    loglik, r, solver_error, predicted, error = (np.asarray(a) for a in _pointwise(jnp.asarray(fit.x), split.both))
+    n, ok = split.n_fit_bins, bool(solver_error <= 1.0)
+    part = lambda s: Evaluation(loglik[s], r[s], predicted[s], error[s], ok)  # noqa: E731
+    return part(slice(None, n)), part(slice(n, None))
 
 
 __all__ = ["BATCH", "Evaluation", "MAX_STEPS", "gauss_newton_gain", "ModelFit", "RIDGE_SD", "evaluate", "fit_models"]

@@ -107,7 +107,7 @@ def _score(
     name, fit, split, before: ModelFit, before_fit: Evaluation, before_held: Evaluation, gates, diag
 ) -> _Candidate:
     effect = LIBRARY[name]
-    fit_eval, held_eval = evaluate(fit, split.fit), evaluate(fit, split.held_out)
+    fit_eval, held_eval = evaluate(fit, split)
     diff = held_eval.loglik - before_held.loglik
     block_diff = _blocks(split.held_out_covariates.block, diff)
     delta_elpd = float(diff.sum())
@@ -213,7 +213,7 @@ def discover(split: SplitData, *, base=DEFAULT_BASE, gates: Gates = Gates(), see
     base = check_effects(base)
     current = _fit_base(base, split, gates, seed)
     base_fit = current
-    cur_fit, cur_held = evaluate(current, split.fit), evaluate(current, split.held_out)
+    cur_fit, cur_held = evaluate(current, split)
     first_fit, first_held = cur_fit, cur_held
     say(
         f"base model {'+'.join(base)} fitted: standardized RMSE fit {_rmse(cur_fit.r):.2f}, "
