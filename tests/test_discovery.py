@@ -2,7 +2,8 @@
 version of the hidden-effect validation (experiments/discrepancy_benchmark.py runs the full one).
 
 Seeds 100-199 are the tests' (the benchmark uses 1000 on, tuning used 0-9). Every run of the superset model
-shares one compilation per data shape, so the slow tests share one dataset shape.
+shares one compilation per data shape, so the discover tests share one: the quasi-static tests of the harness
+protocol (the step response's compilation would add minutes; the benchmark covers it).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from peano_bayes.discovery.harness import TRUTH_CONFIG, TRUTH_PARAMS, Case, hidd
 from peano_bayes.discovery.model import NAMES, SUPERSET_CONFIG, model_spec, to_unconstrained, to_values
 from peano_bayes.inference.likelihood import predict
 
+QUASI_STATIC = ("load_cycle", "blocking", "stroke")
 DESIGN_EFFECTS = (
     "hysteresis",
     "viscoelastic_relaxation",
@@ -48,16 +50,13 @@ def test_library_has_every_design_effect_and_noise_alternatives():
 
 
 def test_unconstrained_round_trip():
-    x = np.array(
-        [
-            0.5 * (a + b)
-            for a, b in (
-                (0.31, 0.99) if n == "length_fraction" else (0.4, 0.6) if n == "sensor_gain" else (1e-3, 1.0)
-                for n in NAMES
-            )
-        ]
-    )
-    np.testing.assert_allclose(np.asarray(to_values(to_unconstrained(x))), x, rtol=1e-9)
+    """Values at 10 %, 50 % and 90 % of each bound interval (log scale for positive parameters) come back."""
+    from peano_bayes.discovery.model import _HIGH, _LOW, _SIGNED
+
+    for q in (0.1, 0.5, 0.9):
+        with np.errstate(invalid="ignore"):  # log of the signed parameters' negative bounds, not used
+            x = np.where(_SIGNED, _LOW + q * (_HIGH - _LOW), np.exp(np.log(_LOW) + q * np.log(_HIGH / _LOW)))
+        np.testing.assert_allclose(np.asarray(to_values(to_unconstrained(x))), x, rtol=1e-9)
 
 
 def test_model_spec_pins_inactive_effects_at_off():
@@ -140,7 +139,8 @@ def test_wilson_interval_known_values():
 
 def test_discover_cli_names_hidden_hysteresis_and_shrinks_the_gap(hysteresis_data, tmp_path, capsys):
     csv = save(hysteresis_data, tmp_path / "hidden")
-    assert main(["discover", str(csv), "--out", str(tmp_path / "out"), "--json"]) == 0
+    out = str(tmp_path / "out")
+    assert main(["discover", str(csv), "--out", out, "--tests", *QUASI_STATIC, "--json"]) == 0
     last = capsys.readouterr().out.strip().splitlines()[-1]
     report = json.loads(last)
     assert report == json.loads((tmp_path / "out" / "report.json").read_text())
@@ -162,28 +162,23 @@ def test_discover_cli_bad_input_exits_2(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_hidden_effect_validation_small():
-    """Five seeds per case. With five runs a Wilson bound cannot prove recall >= 0.7 (5 of 5 gives a lower
-    bound of 0.57), so this asserts the targets are not contradicted: Wilson upper bound of recall >= 0.7 at
-    SNR 4, Wilson lower bound of the false-positive rate <= 0.15, drift reported as unexplained or none with
-    Wilson upper bound >= 0.8; and held-out RMSE after <= 0.5 x before on correct detections."""
-    seeds = range(110, 115)
-    cases = [
-        Case(),
-        Case(("hysteresis",), 4.0),
-        Case(("flow_restriction",), 4.0),
-        Case(("series_compliance",), 4.0),
-        Case(drift=True),
-    ]
+    """Three seeds per case on the quasi-static tests. Three runs cannot prove recall >= 0.7 with a Wilson bound
+    (3 of 3 gives a lower bound of 0.44), so this asserts the targets are not contradicted: Wilson upper bound of
+    the recall >= 0.7 (fails at 0 of 3), Wilson lower bound of the false-positive rate <= 0.15 (fails at 2 of 3),
+    drift reported as unexplained or none with Wilson upper bound >= 0.8 (fails at 1 of 3); and held-out RMSE
+    after <= 0.5 x before on correct detections. The full validation is experiments/discrepancy_benchmark.py."""
+    seeds = range(110, 113)
+    cases = [Case(), Case(("hysteresis",), 4.0), Case(drift=True)]
     rows = []
     for case in cases:
         for seed in seeds:
-            result = discover(discovery_data(hidden_dataset(case, seed)), seed=seed)
+            result = discover(discovery_data(hidden_dataset(case, seed), tests=QUASI_STATIC), seed=seed)
             rows.append((case, score(case, result.report)))
-    for case in cases[1:4]:
-        hits = sum(r["correct"] for c, r in rows if c == case)
-        assert wilson(hits, 5)[1] >= 0.7, (case.label, [r["outcome"] for c, r in rows if c == case])
-        assert all(r["gap_ratio"] <= 0.5 for c, r in rows if c == case and r["correct"])
+    outcomes = {c.label: [r["outcome"] for cc, r in rows if cc == c] for c in cases}
+    hits = sum(r["correct"] for c, r in rows if c == cases[1])
+    assert wilson(hits, 3)[1] >= 0.7, outcomes
+    assert all(r["gap_ratio"] <= 0.5 for c, r in rows if c == cases[1] and r["correct"]), outcomes
     false_positives = sum(r["false_positive"] for c, r in rows if c == cases[0])
-    assert wilson(false_positives, 5)[0] <= 0.15
-    drift_ok = sum(r["correct"] for c, r in rows if c == cases[4])
-    assert wilson(drift_ok, 5)[1] >= 0.8
+    assert wilson(false_positives, 3)[0] <= 0.15, outcomes
+    drift_ok = sum(r["correct"] for c, r in rows if c == cases[2])
+    assert wilson(drift_ok, 3)[1] >= 0.8, outcomes

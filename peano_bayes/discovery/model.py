@@ -71,7 +71,8 @@ def to_values(u):
 def to_unconstrained(values) -> np.ndarray:
     """Inverse of :func:`to_values`; values are clipped just inside their bounds."""
     x = np.clip(np.asarray(values, dtype=float), _LOW * (1 + 1e-9), _HIGH * (1 - 1e-9) + (_SIGNED * 2e-9 * _HIGH))
-    s = (np.log(np.abs(x)) - np.log(_LOW)) / (np.log(_HIGH) - np.log(_LOW))
+    with np.errstate(invalid="ignore", divide="ignore"):  # the positive branch of signed parameters is unused
+        s = (np.log(np.abs(x)) - np.log(_LOW)) / (np.log(_HIGH) - np.log(_LOW))
     s = np.clip(s, 1e-9, 1 - 1e-9)
     positive = np.log(s / (1 - s))
     t = np.clip((x - 0.5 * (_LOW + _HIGH)) / (0.5 * (_HIGH - _LOW)), -1 + 1e-9, 1 - 1e-9)

@@ -12,7 +12,9 @@ significant.
    with ``se`` from the per-block differences (a block is ten consecutive bins of one run);
 2. parsimony: ``delta BIC <= max_delta_bic``, the log-likelihood scaled by ``n_eff / n`` and the penalty using
    ``n_eff = n (1 - rho1) / (1 + rho1)`` from the lag-1 autocorrelation of the residuals;
-3. the effect explains its own signature: ``T_after / T_before <= max_signature_ratio``;
+3. the effect explains its own signature: ``T_after / T_before <= max_signature_ratio`` (checked only where the
+   signature was visible, ``T_before >= min_signature``: the base often absorbs part of an effect, and a ratio
+   of two noise-level numbers says nothing);
 4. it is real: some strength parameter is more than ``strength_z`` Laplace sd from its off value (the 94 %
    interval excludes off);
 5. it generalizes: held-out RMSE (standardized) ``<= max_heldout_ratio`` times the value before.
@@ -52,6 +54,7 @@ class Gates:
     min_elpd_z: float = 1.0
     max_delta_bic: float = -10.0
     max_signature_ratio: float = 0.5
+    min_signature: float = 3.0
     strength_z: float = 1.88
     max_heldout_ratio: float = 0.98
     alpha: float = 0.01
@@ -140,17 +143,18 @@ def _score(
         "strength_z": {k: float(v) for k, v in z_strength.items()},
         "heldout_rmse_ratio": float(heldout_ratio),
         "max_correlation_with_base": correlation,
-        "weakly_identified": correlation > gates.max_correlation,
+        "weakly_identified": bool(correlation > gates.max_correlation),
         "solver_ok": fit_eval.solver_ok and held_eval.solver_ok,
     }
     checks = {
         "predictive_gain": delta_elpd >= gates.min_delta_elpd and delta_elpd >= gates.min_elpd_z * se,
         "parsimony": delta_bic <= gates.max_delta_bic,
-        "own_signature": evidence["signature_ratio"] <= gates.max_signature_ratio,
+        "own_signature": t_before < gates.min_signature or evidence["signature_ratio"] <= gates.max_signature_ratio,
         "strength_excludes_off": max(z_strength.values()) >= gates.strength_z,
         "generalizes": heldout_ratio <= gates.max_heldout_ratio,
         "solver_ok": evidence["solver_ok"],
     }
+    checks = {k: bool(v) for k, v in checks.items()}
     evidence["gates"] = checks
     return _Candidate(name, fit, fit_eval, held_eval, evidence, all(checks.values()))
 
@@ -181,7 +185,7 @@ def _fit_base(base, split: SplitData, gates: Gates, seed: int) -> ModelFit:
 
 def _diagnosis_dict(d: Diagnosis) -> dict:
     return {
-        "structure_left": d.structure_left,
+        "structure_left": bool(d.structure_left),
         "omnibus_p": d.omnibus_p,
         "signatures": {k: {"T": d.statistic[k], "p": d.p_value[k], "p_holm": d.p_holm[k]} for k in d.statistic},
     }
@@ -301,7 +305,7 @@ def discover(split: SplitData, *, base=DEFAULT_BASE, gates: Gates = Gates(), see
         "named": named,
         "noise_model": [s["effect"] for s in steps if s["kind"] == "noise"],
         "ambiguous": ambiguous,
-        "structure_left": diag.structure_left,
+        "structure_left": bool(diag.structure_left),
         "stopped": stopped,
         "base": list(base),
         "final_model": list(current.spec.active),
