@@ -20,9 +20,10 @@ significant.
 5. it generalizes: held-out RMSE (standardized) ``<= max_heldout_ratio`` times the value before.
 A candidate strongly correlated with a base parameter (``|corr| > 0.95``) is flagged "weakly identified".
 
-**Verdicts:** the physics effects added (``named``); ``ambiguous`` when a rival passed every gate with an
-elpd within two standard errors of the winner (the rivals and, for pairs in
-:data:`~peano_bayes.discovery.effects.CONFUSABLE`, the experiment that separates them are reported);
+**Verdicts:** the physics effects added (``named``); ``ambiguous`` when a rival of a known confusable pair
+(:data:`~peano_bayes.discovery.effects.CONFUSABLE`) passed every gate with an elpd within two standard errors of
+the winner (the rivals and the experiment that separates them are reported; a passing candidate outside such a
+pair is screened again once the winner is in the model);
 ``unexplained`` when structure is left and no candidate passes; ``none`` otherwise. Noise-side effects that
 pass are added and reported as the noise model, never as physics.
 """
@@ -263,6 +264,8 @@ def discover(split: SplitData, *, base=DEFAULT_BASE, gates: Gates = Gates(), see
         best = pool[0]
         rivals = []
         for c in pool[1:]:
+            if frozenset({best.name, c.name}) not in CONFUSABLE:
+                continue  # not a known confusion: the loser is screened again once the winner is in the model
             d = _blocks(split.held_out_covariates.block, best.held_eval.loglik - c.held_eval.loglik)
             se = float(np.sqrt(d.size) * np.std(d, ddof=1)) if d.size > 1 else float("inf")
             if d.sum() < 2.0 * se:
