@@ -97,10 +97,11 @@ def _read_rows(out: Path) -> dict:
 
 def _todo(out: Path, snrs, noise_levels, seeds: int, first_seed: int) -> list[tuple[Case, int]]:
     done = _read_rows(out)
+    # Seed-major: a run stopped early has every case at (almost) the same number of seeds.
     return [
         (case, s)
-        for case in cases(snrs, noise_levels)
         for s in range(first_seed, first_seed + seeds)
+        for case in cases(snrs, noise_levels)
         if key(case, s) not in done
     ]
 
@@ -157,6 +158,15 @@ def run(out: Path, snrs, noise_levels, seeds: int, first_seed: int, jobs: int) -
     return list(_read_rows(out).values())
 
 
+def markdown(df: pd.DataFrame, index: bool = True) -> str:
+    """A pipe table (pandas' to_markdown needs tabulate, which the project does not install)."""
+    df = df.reset_index() if index else df
+    cell = lambda v: f"{v:.2f}" if isinstance(v, float) else str(v)  # noqa: E731
+    lines = ["| " + " | ".join(map(str, df.columns)) + " |", "|" + "---|" * len(df.columns)]
+    lines += ["| " + " | ".join(cell(v) for v in row) + " |" for row in df.itertuples(index=False)]
+    return "\n".join(lines)
+
+
 def analyse(rows: list[dict], out: Path) -> dict:
     df = pd.DataFrame(rows)
     df["row"] = np.where(df["drift"], "drift", df["label"]) + np.where(
@@ -210,11 +220,11 @@ def analyse(rows: list[dict], out: Path) -> dict:
         "",
         "## Recall per effect (Wilson 95 % interval)",
         "",
-        recall.to_markdown(index=False, floatfmt=".2f"),
+        markdown(recall, index=False),
         "",
         "## False positives: a physics effect named when none is hidden",
         "",
-        fp.to_markdown(index=False, floatfmt=".2f"),
+        markdown(fp, index=False),
         "",
         f"## Out of library (load-cell drift): unexplained or none in {drift_ok} of {len(drift)}",
         "",
@@ -223,11 +233,11 @@ def analyse(rows: list[dict], out: Path) -> dict:
         "",
         "## Held-out gap on correct detections (RMSE after / before, worst test)",
         "",
-        gap.to_markdown(floatfmt=".2f"),
+        markdown(gap),
         "",
         "## Confusion matrix (rows: hidden, columns: verdict)",
         "",
-        confusion.to_markdown(),
+        markdown(confusion),
         "",
     ]
     (out / "BENCHMARK.md").write_text("\n".join(md))
