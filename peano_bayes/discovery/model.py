@@ -172,11 +172,6 @@ def flat_predictions(x, data: DiscoveryData):
     return predicted, jnp.concatenate(obs) - predicted
 
 
-def measured_mask(data: DiscoveryData) -> np.ndarray:
-    """(n,) which flat bins hold a measurement."""
-    return np.concatenate([np.isfinite(np.asarray(g.observed)).ravel() for g in data.groups])
-
-
 def pointwise_log_likelihood(x, data: DiscoveryData):
     """Gaussian log-likelihood of every flat bin (n,) (0 where unmeasured)."""
     r, log_sd, _ = standardized(x, data)
@@ -192,7 +187,6 @@ __all__ = [
     "NAMES",
     "SUPERSET_CONFIG",
     "flat_predictions",
-    "measured_mask",
     "model_spec",
     "pointwise_log_likelihood",
     "predictions",

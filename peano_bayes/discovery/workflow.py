@@ -233,8 +233,10 @@ def discover(split: SplitData, *, base=DEFAULT_BASE, gates: Gates = Gates(), see
         inactive = [e for e in LIBRARY if e not in current.spec.active]
         present = dict(zip(NAMES, current.x, strict=True))
         specs = {e: model_spec(current.spec.active + (e,), present) for e in inactive}
+        starts = {e: _start(current, e) for e in inactive}
+        cost = float(np.sum(cur_fit.r**2))
         gain = {
-            e: gauss_newton_gain(specs[e], _start(current, e), split.fit, float(np.sum(cur_fit.r**2)))
+            e: gauss_newton_gain(specs[e], starts[e], split.fit, cost)
             for e in inactive
             if e not in SCREENED_BY_SIGNATURE
         }
@@ -246,7 +248,7 @@ def discover(split: SplitData, *, base=DEFAULT_BASE, gates: Gates = Gates(), see
             f"step {iteration + 1}: {'structure left' if diag.structure_left else 'no significant structure'}; "
             f"refitting {', '.join(ranked)}"
         )
-        fits = fit_models([specs[e] for e in ranked], [_start(current, e) for e in ranked], split.fit)
+        fits = fit_models([specs[e] for e in ranked], [starts[e] for e in ranked], split.fit)
         candidates = [
             _score(e, f, split, current, cur_fit, cur_held, gates, diag)
             for e, f in zip(ranked, fits, strict=True)
