@@ -181,8 +181,12 @@ def material_figures(result_dir: str | Path, dataset=None) -> list[Path]:
             ax.yaxis.set_major_locator(matplotlib.ticker.MaxNLocator(4))
             ax.xaxis.label.set_fontsize(8)
             ax.yaxis.label.set_fontsize(8)
+        for i in range(len(names)):  # diagonal panels are marginal densities: their y scale is not the row's
+            axes[i][i].set_ylabel("")
+            axes[i][i].tick_params(axis="y", labelleft=False)
         fig = np.ravel(axes)[0].figure
-        fig.suptitle(f"{code}: posterior of the physical parameters (SI units)", y=1.0)
+        fig.subplots_adjust(top=0.96)  # arviz leaves matplotlib's default 12 % blank above the grid
+        fig.suptitle(f"{code}: posterior of the physical parameters (SI units)", y=0.985)
         written += save(fig, result_dir / "figures" / "corner")
     return written
 
