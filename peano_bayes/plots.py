@@ -136,12 +136,22 @@ def residuals_against(ax, x, before, after, *, xlabel: str, title: str = ""):
     ``before`` and ``after`` are ``(residuals (n,), (bin centres, bin means))``; points and binned means."""
     r_before, (cb, mb) = before
     r_after, (ca, ma) = after
+    ax.set_xlabel(xlabel)
+    finite = np.asarray(x, dtype=float)[np.isfinite(x)]
+    if finite.size == 0:
+        ax.text(0.5, 0.5, "no data for this covariate", ha="center", va="center", transform=ax.transAxes)
+        ax.set_xticks([])
+        ax.set_yticks([])
+        return
     ax.scatter(x, r_before, s=3, alpha=0.25, color=PUBLISHED_COLOUR, label="base model", rasterized=True)
     ax.scatter(x, r_after, s=3, alpha=0.25, color=MODEL_COLOUR, label="final model", rasterized=True)
-    ax.plot(cb, mb, color=PUBLISHED_COLOUR, lw=1.8)
-    ax.plot(ca, ma, color=MODEL_COLOUR, lw=1.8)
+    style = {"marker": "o", "ls": "none", "ms": 6} if np.unique(finite).size <= 5 else {"lw": 1.8}
+    ax.plot(cb, mb, color=PUBLISHED_COLOUR, **style)
+    ax.plot(ca, ma, color=MODEL_COLOUR, **style)
     ax.axhline(0.0, color=DATA_COLOUR, lw=0.8)
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel("residual / noise sd [-]")
+    # Linear within +-3 sd, logarithmic beyond: a base misfit of hundreds of sd and a final model at the noise
+    # level stay legible on one axis.
+    ax.set_yscale("symlog", linthresh=3.0)
+    ax.set_ylabel("residual / noise sd [-] (symlog)")
     if title:
         ax.set_title(title)

@@ -52,6 +52,21 @@ def test_forest_and_published_mark_each_material_and_value():
     plt.close(fig)
 
 
+def test_residuals_against_keeps_noise_and_misfit_legible_and_says_when_empty():
+    x = np.array([-1.0, -1.0, 1.0, 1.0])
+    before = (np.array([200.0, 210.0, -300.0, -290.0]), (np.array([-1.0, 1.0]), np.array([205.0, -295.0])))
+    after = (np.array([0.5, -0.5, 1.0, -1.0]), (np.array([-1.0, 1.0]), np.array([0.0, 0.0])))
+    fig, (ax, empty) = plt.subplots(1, 2)
+    plots.residuals_against(ax, x, before, after, xlabel="strain-rate sign [-]")
+    assert ax.get_yscale() == "symlog" and UNIT.search(ax.get_ylabel())
+    means = [line for line in ax.get_lines() if line.get_marker() == "o"]
+    assert len(means) == 2 and all(line.get_linestyle() == "None" for line in means)  # two levels: no joining line
+    nothing = (np.array([]), (np.array([]), np.array([])))
+    plots.residuals_against(empty, np.array([]), nothing, nothing, xlabel="time since the step [s]")
+    assert [t.get_text() for t in empty.texts] == ["no data for this covariate"]
+    plt.close(fig)
+
+
 def test_probability_heatmap_writes_every_finite_cell():
     fig, ax = plt.subplots()
     plots.probability_heatmap(ax, [[0.25, 0.75], [np.nan, 1.0]], ["r1", "r2"], ["c1", "c2"])

@@ -66,8 +66,11 @@ def residual_figure(result, path_stem: Path) -> list[Path]:
         for ax, panel in zip(axes.ravel(), panels, strict=True):
             plots.residuals_against(ax, panel["x"], panel["before"], panel["after"], xlabel=panel["xlabel"])
         axes[0, 0].legend(loc="best", markerscale=4)
-        final = "+".join(result.report["final_model"])
-        fig.suptitle(f"Residuals on the fitted runs: base model (red) and final model {final} (blue)")
+        added = [e for e in result.report["final_model"] if e not in result.report["base"]]
+        fig.suptitle(
+            "Residuals on the fitted runs: base model (red) and final model (blue)\n"
+            f"base: {' + '.join(result.report['base'])}; added: {', '.join(added) or 'nothing'}"
+        )
     return save(fig, path_stem)
 
 
