@@ -179,6 +179,9 @@ def material_figures(result_dir: str | Path, dataset=None) -> list[Path]:
         for ax in np.ravel(axes):
             ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(3))
             ax.yaxis.set_major_locator(matplotlib.ticker.MaxNLocator(4))
+            for axis in (ax.xaxis, ax.yaxis):  # "%.3g" labels: no "1e6" multiplier text over the axis label
+                axis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:.3g}"))
+            ax.tick_params(axis="x", labelrotation=35)  # long labels ("2.2e+06") of neighbours would overlap
             ax.xaxis.label.set_fontsize(8)
             ax.yaxis.label.set_fontsize(8)
         for i in range(len(names)):  # diagonal panels are marginal densities: their y scale is not the row's
