@@ -325,9 +325,15 @@ def index_markdown(
                 "",
             ]
     if ranking and ranking.get("criteria"):
+        unconverged = [s["material"] for s in summaries if not s["convergence"]["converged"]]
+        lines += ["## Ranking across materials", ""]
+        if unconverged:
+            lines += [
+                f"**Provisional for {', '.join(unconverged)}:** chains not converged (see above), so the "
+                "probabilities involving them rest on an unconverged posterior.",
+                "",
+            ]
         lines += [
-            "## Ranking across materials",
-            "",
             "Figures: [parameters across materials](figures/forest.png), "
             "[metrics against the paper](figures/published.png), [P(best) per criterion](figures/ranking.png).",
             "",

@@ -240,6 +240,8 @@ def test_killed_fit_resumes_without_losing_a_chunk(tmp_path):
     for link in ("TP/figures/predictive.png", "TP/figures/corner.png", "figures/forest.png", "figures/ranking.png"):
         assert f"({link})" in index and (out / link).exists(), link
     assert "## Ranking across materials" in index and ranking["materials"] == ["TP"]
+    converged = json.loads((out / "TP" / "summary.json").read_text())["convergence"]["converged"]
+    assert ("**Provisional for TP:**" in index) == (not converged)  # rankings on an unconverged chain are flagged
     assert (out / "TP" / "metrics.json").exists() and (out / "ranking.json").exists()
     # The fit report puts the paper's reference models, fitted to the same load cycles, beside ours.
     reference = json.loads((out / "TP" / "reference_models.json").read_text())
