@@ -256,8 +256,10 @@ def cross_material_figures(out_dir: str | Path, results: dict, metrics: dict, ra
         if published:
             fig, axes = _grid(len(published))
             for ax, (name, (codes, med, low, high, pub)) in zip(axes, published.items(), strict=True):
+                prior_only = any(metrics[c]["summary"][name].get("from_prior") for c in codes)
+                title = name + (" (prior only)" if prior_only else "")
                 plots.published_versus_posterior(
-                    ax, codes, med, low, high, pub, xlabel=f"[{METRIC_UNITS[name]}]", title=name
+                    ax, codes, med, low, high, pub, xlabel=f"[{METRIC_UNITS[name]}]", title=title
                 )
             axes[0].legend(loc="best")
             fig.suptitle("Posterior predictive metrics (94 % HDI) against the published values (x)", y=1.01)
@@ -268,8 +270,9 @@ def cross_material_figures(out_dir: str | Path, results: dict, metrics: dict, ra
             criteria = list(ranking["criteria"])
             matrix = [[ranking["criteria"][c]["p_best"][m] for m in codes] for c in criteria]
             fig, ax = plt.subplots(figsize=(1.0 * len(codes) + 3.0, 0.45 * len(criteria) + 1.2))
+            rows = [c + (" (prior only)" if ranking["criteria"][c].get("from_prior") else "") for c in criteria]
             plots.probability_heatmap(
-                ax, matrix, criteria, codes, title="P(best) per criterion", colorbar_label="P(best) [-]"
+                ax, matrix, rows, codes, title="P(best) per criterion", colorbar_label="P(best) [-]"
             )
             written += save(fig, out_dir / "figures" / "ranking")
     return written
