@@ -133,3 +133,13 @@ def test_response_time_is_contraction_over_step_speed_and_flagged_when_from_the_
         assert top["p_each"]["response_time"] == pytest.approx(expected)
         assert "rests on the prior" in report["notes"][0] and "Note: response time" in recommendation_markdown(report)
     assert top["binding"] == "response_time"
+
+
+def test_an_unconverged_material_makes_the_recommendation_provisional(results, tmp_path):
+    root = tmp_path / "unconverged"
+    shutil.copytree(results, root)
+    spec = _spec(tmp_path, GOOD, "n_tubes = [4]\n")
+    for converged in (True, False):
+        (root / "TP" / "summary.json").write_text(json.dumps({"convergence": {"converged": converged}}))
+        notes = recommend(spec, root, log=lambda m: None)["notes"]
+        assert any("the chains of TP did not converge" in n for n in notes) == (not converged)
