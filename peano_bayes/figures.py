@@ -141,12 +141,11 @@ def material_figures(result_dir: str | Path, dataset=None) -> list[Path]:
                 band["median"],
                 band["high"],
                 ylabel="strain [-]",
-                title=band["title"],
+                title=f"{code}: {band['title']}\nmodel: {source}",
                 label_band=f"94 % of {band['n_draws']} model draws",
                 label_median="model median",
             )
             ax.legend(loc="lower right", frameon=False)
-            fig.suptitle(f"{code}: step response against the model ({source})", fontsize=9)
             written += save(fig, result_dir / "figures" / "step")
     panels = predictive_runs(idata)
     with plt.rc_context(plots.STYLE):

@@ -182,3 +182,28 @@ def test_hidden_effect_validation_small():
     assert wilson(false_positives, 3)[0] <= 0.15, outcomes
     drift_ok = sum(r["correct"] for c, r in rows if c == cases[2])
     assert wilson(drift_ok, 3)[1] >= 0.8, outcomes
+
+
+def test_residual_panels_keep_the_base_noise_units_when_a_noise_effect_widens_the_sd():
+    from types import SimpleNamespace
+
+    from peano_bayes.discovery.report import covariate_panels
+
+    n = 6
+    cov = SimpleNamespace(
+        test=np.array(["load_cycle"] * n),
+        pressure_pa=np.linspace(0.0, 2e5, n),
+        strain=np.linspace(-0.05, 0.2, n),
+        rate_sign=np.array([1.0, 1.0, 1.0, -1.0, -1.0, -1.0]),
+        time_since_step_s=np.full(n, np.nan),
+        cycle=np.zeros(n, dtype=int),
+    )
+    error = np.array([4.0, -2.0, 6.0, 0.0, 8.0, -4.0])  # observed - predicted [N], the same misfit in both models
+    base_sd, widened_sd = 2.0, 20.0
+    before = SimpleNamespace(r=error / base_sd, error=error, predicted=np.arange(n, dtype=float))
+    after = SimpleNamespace(r=error / widened_sd, error=error, predicted=np.arange(n, dtype=float))
+    result = SimpleNamespace(split=SimpleNamespace(fit_covariates=cov), before=before, after=after)
+    pressure = covariate_panels(result)[0]
+    # A zero base residual leaves the sd of that bin unknown: that point is dropped, never shown as a fit.
+    np.testing.assert_allclose(pressure["after"][0], [2.0, -1.0, 3.0, np.nan, 4.0, -2.0])
+    np.testing.assert_allclose(pressure["before"][0], error / base_sd)

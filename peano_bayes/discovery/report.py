@@ -30,8 +30,8 @@ def _binned(x: np.ndarray, r: np.ndarray, bins: int = 12) -> tuple[np.ndarray, n
 
 
 def covariate_panels(result) -> list[dict]:
-    """Per covariate: ``x``, ``xlabel``, and ``before`` / ``after`` as ``(residuals, (centres, means))``, on the
-    bins where the covariate is defined."""
+    """Per covariate: ``x``, ``xlabel``, and ``before`` / ``after`` as ``(residuals in the base model's noise sd,
+    (centres, means))``, on the bins where the covariate is defined."""
     cov = result.split.fit_covariates
     force = np.isin(cov.test, ("load_cycle", "blocking"))
     step = cov.test == "step"
@@ -43,10 +43,15 @@ def covariate_panels(result) -> list[dict]:
         ("time since the step [s]", np.nan_to_num(cov.time_since_step_s), step),
         ("cycle index [-]", cov.cycle.astype(float), np.ones_like(force)),
     ]
+    # Both models' residuals in the base model's noise units: a noise-side effect (heteroscedastic noise)
+    # widens the final model's own sd, and its standardized residuals would hide the misfit it absorbed.
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sd = np.where(result.before.r != 0.0, result.before.error / result.before.r, np.nan)
+        after = result.after.error / sd
     out = []
     for label, x, where in panels:
         where = where.astype(bool)
-        rb, ra = result.before.r[where], result.after.r[where]
+        rb, ra = result.before.r[where], after[where]
         out.append(
             {
                 "x": x[where],
@@ -68,7 +73,7 @@ def residual_figure(result, path_stem: Path) -> list[Path]:
         axes[0, 0].legend(loc="best", markerscale=4)
         added = [e for e in result.report["final_model"] if e not in result.report["base"]]
         fig.suptitle(
-            "Residuals on the fitted runs: base model (red) and final model (blue)\n"
+            "Residuals on the fitted runs in the base model's noise sd: base model (red) and final model (blue)\n"
             f"base: {' + '.join(result.report['base'])}; added: {', '.join(added) or 'nothing'}"
         )
     return save(fig, path_stem)
