@@ -312,13 +312,6 @@ def explain(candidate: dict, requirement: Requirement) -> str:
     )
 
 
-def _converged(directory: Path) -> bool:
-    """Whether the result in ``directory`` met the sampler's convergence gates (its ``summary.json``; a result
-    without one, e.g. written by the Python API, counts as converged)."""
-    summary = directory / "summary.json"
-    return not summary.exists() or bool(json.loads(summary.read_text())["convergence"]["converged"])
-
-
 def recommend(spec_path: str | Path, results_dir: str | Path | None = None, *, log=print) -> dict:
     """Load a spec and the material results it names, score every candidate; returns ``requirement``,
     ``candidates`` (best first, see :func:`evaluate_candidates`) and ``explanation`` of the top one."""
@@ -345,7 +338,7 @@ def recommend(spec_path: str | Path, results_dir: str | Path | None = None, *, l
                 f"response time of {', '.join(prior_based)} rests on the prior of the inlet and damping "
                 "parameters: their fits had no step test"
             )
-    unconverged = [c for c in codes if not _converged(root / c)]
+    unconverged = [c for c, (idata, _) in materials.items() if not idata.posterior.attrs.get("converged", 1)]
     if unconverged:
         notes.append(f"the chains of {', '.join(unconverged)} did not converge: their probabilities are provisional")
     return {

@@ -4,6 +4,7 @@ bad and impossible requirements with the key named, and candidates are scored mo
 import json
 import shutil
 
+import arviz as az
 import jax.numpy as jnp
 import pytest
 
@@ -139,7 +140,12 @@ def test_an_unconverged_material_makes_the_recommendation_provisional(results, t
     root = tmp_path / "unconverged"
     shutil.copytree(results, root)
     spec = _spec(tmp_path, GOOD, "n_tubes = [4]\n")
-    for converged in (True, False):
-        (root / "TP" / "summary.json").write_text(json.dumps({"convergence": {"converged": converged}}))
+    nc = root / "TP" / "posterior.nc"
+    for converged in (1, 0):
+        idata = az.from_netcdf(str(nc))
+        idata.load()  # read everything before the file it came from is overwritten
+        idata.posterior.attrs["converged"] = converged
+        idata.to_netcdf(str(nc.with_suffix(".tmp")))
+        nc.with_suffix(".tmp").replace(nc)
         notes = recommend(spec, root, log=lambda m: None)["notes"]
         assert any("the chains of TP did not converge" in n for n in notes) == (not converged)
