@@ -29,7 +29,8 @@ import numpy as np
 import pandas as pd
 
 from peano_bayes import enable_compilation_cache
-from peano_bayes.discovery.harness import HIDEABLE, NOT_HIDEABLE, Case, strength_for_snr, wilson
+from peano_bayes.discovery.harness import HIDEABLE, NOT_HIDEABLE, Case, strength_for_snr
+from peano_bayes.inference.calibration import wilson_interval
 
 HERE = Path(__file__).resolve().parent
 TWO_EFFECTS = ("hysteresis", "flow_restriction")
@@ -180,14 +181,14 @@ def analyse(rows: list[dict], out: Path) -> dict:
     recall = []
     for (label, snr), g in df[(df["snr"] > 0) & (df["effects"].map(len) == 1)].groupby(["label", "snr"]):
         k, n = int(g["correct"].sum()), len(g)
-        lo, hi = wilson(k, n)
+        lo, hi = wilson_interval(k, n)
         recall.append({"effect": label, "snr": snr, "n": n, "recall": k / n, "wilson_low": lo, "wilson_high": hi})
     recall = pd.DataFrame(recall)
     recall.to_csv(out / "recall.csv", index=False)
     fp = []
     for sd, g in df[(df["label"] == "none") & ~df["drift"]].groupby("force_sd_n"):
         k, n = int(g["false_positive"].sum()), len(g)
-        lo, hi = wilson(k, n)
+        lo, hi = wilson_interval(k, n)
         fp.append({"force_sd_n": sd, "n": n, "false_positive_rate": k / n, "wilson_low": lo, "wilson_high": hi})
     fp = pd.DataFrame(fp)
     fp.to_csv(out / "false_positives.csv", index=False)
@@ -206,7 +207,7 @@ def analyse(rows: list[dict], out: Path) -> dict:
         "false_positive_rate_by_noise": {f"{r.force_sd_n:g}": r.false_positive_rate for r in fp.itertuples()},
         "false_positive_wilson_high_max": float(fp["wilson_high"].max()) if len(fp) else None,
         "drift_unexplained_or_none": drift_ok / len(drift) if len(drift) else None,
-        "drift_wilson_low": wilson(drift_ok, len(drift))[0] if len(drift) else None,
+        "drift_wilson_low": wilson_interval(drift_ok, len(drift))[0] if len(drift) else None,
         "two_effects_exact": float(two["correct"].mean()) if len(two) else None,
         "gap_ratio_median_on_hits": float(hits["gap_ratio"].median()) if len(hits) else None,
         "gap_share_at_most_half_on_hits": float(np.mean(hits["gap_ratio"] <= 0.5)) if len(hits) else None,

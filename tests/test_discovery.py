@@ -19,8 +19,9 @@ from peano_bayes.data import save
 from peano_bayes.discovery import LIBRARY, discover, discovery_data
 from peano_bayes.discovery.diagnose import diagnose, signature_statistic
 from peano_bayes.discovery.effects import CONFUSABLE, NOISE_EFFECTS, PHYSICS_EFFECTS
-from peano_bayes.discovery.harness import TRUTH_CONFIG, TRUTH_PARAMS, Case, hidden_dataset, score, wilson
+from peano_bayes.discovery.harness import TRUTH_CONFIG, TRUTH_PARAMS, Case, hidden_dataset, score
 from peano_bayes.discovery.model import NAMES, SUPERSET_CONFIG, model_spec, to_unconstrained, to_values
+from peano_bayes.inference.calibration import wilson_interval
 from peano_bayes.inference.likelihood import predict
 
 QUASI_STATIC = ("load_cycle", "blocking", "stroke")
@@ -131,9 +132,9 @@ def test_signature_test_respects_block_structure():
 
 
 def test_wilson_interval_known_values():
-    low, high = wilson(0, 10)
+    low, high = wilson_interval(0, 10)
     assert low == 0.0 and high == pytest.approx(0.2775, abs=1e-4)
-    low, high = wilson(10, 10)
+    low, high = wilson_interval(10, 10)
     assert low == pytest.approx(0.7225, abs=1e-4) and high == 1.0
 
 
@@ -176,12 +177,12 @@ def test_hidden_effect_validation_small():
             rows.append((case, score(case, result.report)))
     outcomes = {c.label: [r["outcome"] for cc, r in rows if cc == c] for c in cases}
     hits = sum(r["correct"] for c, r in rows if c == cases[1])
-    assert wilson(hits, 3)[1] >= 0.7, outcomes
+    assert wilson_interval(hits, 3)[1] >= 0.7, outcomes
     assert all(r["gap_ratio"] <= 0.5 for c, r in rows if c == cases[1] and r["correct"]), outcomes
     false_positives = sum(r["false_positive"] for c, r in rows if c == cases[0])
-    assert wilson(false_positives, 3)[0] <= 0.15, outcomes
+    assert wilson_interval(false_positives, 3)[0] <= 0.15, outcomes
     drift_ok = sum(r["correct"] for c, r in rows if c == cases[2])
-    assert wilson(drift_ok, 3)[1] >= 0.8, outcomes
+    assert wilson_interval(drift_ok, 3)[1] >= 0.8, outcomes
 
 
 def test_residual_panels_keep_the_base_noise_units_when_a_noise_effect_widens_the_sd():

@@ -213,16 +213,6 @@ def score(case: Case, report: dict) -> dict:
     }
 
 
-def wilson(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
-    """Wilson score interval of a binomial proportion (95 % by default)."""
-    if n == 0:
-        return 0.0, 1.0
-    p = successes / n
-    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return max(0.0, centre - half), min(1.0, centre + half)
-
-
 __all__ = [
     "Case",
     "HIDEABLE",
@@ -234,5 +224,4 @@ __all__ = [
     "rig_noise",
     "score",
     "strength_for_snr",
-    "wilson",
 ]
