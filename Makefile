@@ -18,8 +18,10 @@ env: $(STAMP)
 run: $(STAMP)
 	$(BIN)/peano-bayes run
 
+# Two workers (the CI machine's two cores); tests sharing an expensive fixture or compilation carry one
+# xdist_group, so one worker builds it once.
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n 2 --dist loadgroup
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

@@ -24,6 +24,9 @@ from peano_bayes.discovery.model import NAMES, SUPERSET_CONFIG, model_spec, to_u
 from peano_bayes.inference.calibration import wilson_interval
 from peano_bayes.inference.likelihood import predict
 
+# One xdist worker runs this group, so one compilation of the superset model serves every test here.
+pytestmark = pytest.mark.xdist_group("discovery")
+
 QUASI_STATIC = ("load_cycle", "blocking", "stroke")
 DESIGN_EFFECTS = (
     "hysteresis",

@@ -23,6 +23,9 @@ from peano_bayes.figures import (  # noqa: E402
 from peano_bayes.metrics import evaluate_result, load_result  # noqa: E402
 from peano_bayes.ranking import rank_materials  # noqa: E402
 
+# One xdist worker runs this group, so the session fixture `recovered` (a fit and a sampling run) is built once.
+pytestmark = pytest.mark.xdist_group("recovered")
+
 UNIT = re.compile(r"\[[^\]]+\]")
 
 

@@ -17,6 +17,9 @@ from peano_bayes.metrics import (
     posterior_metrics,
 )
 
+# One xdist worker runs this group, so the session fixture `recovered` (a fit and a sampling run) is built once.
+pytestmark = pytest.mark.xdist_group("recovered")
+
 #: Metrics of the load cycles at the test pressure and the 0 kPa stretch: the fitted test informs them.
 LOAD_CYCLE_METRICS = ("hysteresis_loss", "free_strain", "energy_per_pressure", "stiffness_at_minus_1.5pct_0kPa")
 

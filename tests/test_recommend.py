@@ -13,6 +13,9 @@ from peano_bayes.errors import PeanoBayesInputError
 from peano_bayes.physics import DEFAULT_CONFIG, PAPER_GEOMETRY, Geometry, scale_parameters, static_force, static_strain
 from peano_bayes.recommend import load_spec, recommend, recommendation_markdown
 
+# One xdist worker runs this group, so the session fixture `recovered` (a fit and a sampling run) is built once.
+pytestmark = pytest.mark.xdist_group("recovered")
+
 NOMINAL = {k: jnp.asarray(v) for k, v in DEFAULT_CONFIG.nominal_parameters().items()}
 
 

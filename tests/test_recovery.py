@@ -6,6 +6,9 @@ import arviz as az
 import numpy as np
 import pytest
 
+# One xdist worker runs this group, so the session fixture `recovered` (a fit and a sampling run) is built once.
+pytestmark = pytest.mark.xdist_group("recovered")
+
 
 @pytest.mark.slow
 def test_multistart_fit_recovers_the_generating_parameters(recovered):
