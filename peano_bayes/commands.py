@@ -162,7 +162,7 @@ simulate.arguments = _simulate_arguments
 
 
 def _sampling_arguments(p):
-    from .pipeline import ALL_TESTS, DEFAULT_TESTS
+    from .pipeline import ALL_TESTS, DEFAULT_MAX_STEPS, DEFAULT_TESTS
 
     p.add_argument("--seed", type=int, default=0, help="seed of the starts and the sampler (default: 0)")
     p.add_argument(
@@ -176,7 +176,13 @@ def _sampling_arguments(p):
     p.add_argument("--starts", type=int, default=16, help="least-squares starts (default: 16)")
     p.add_argument("--walkers", type=int, default=None, help="emcee walkers (default: max(32, 2 x parameters + 2))")
     p.add_argument("--chunk", type=int, default=500, help="steps between saved states and checks (default: 500)")
-    p.add_argument("--max-steps", type=int, default=20_000, help="step limit; beyond it the run is unconverged")
+    p.add_argument(
+        "--max-steps",
+        type=int,
+        default=DEFAULT_MAX_STEPS,
+        help=f"step limit (default: {DEFAULT_MAX_STEPS}); beyond it the run is unconverged and its state is kept, "
+        "so --resume with a larger limit continues it",
+    )
     p.add_argument(
         "--warmup", type=int, default=300, help="warm-up steps, discarded, that fit the proposal (default: 300)"
     )

@@ -29,7 +29,7 @@ from .inference.results import (
     write_atomic_text,
     write_netcdf,
 )
-from .inference.sample import sample, walker_count
+from .inference.sample import DEFAULT_MAX_STEPS, sample, walker_count
 
 #: Tests fitted by default. The step response costs ~20x the three quasi-static tests together per
 #: evaluation (45 ms per walker on one core, see README), so it is opt-in (``tests=ALL_TESTS``).
@@ -118,7 +118,7 @@ def infer(
     n_starts: int = 16,
     n_walkers: int | None = None,
     chunk: int = 500,
-    max_steps: int = 20_000,
+    max_steps: int = DEFAULT_MAX_STEPS,
     warmup: int = 300,
     progress: bool = True,
     sample_all: bool = False,
@@ -232,7 +232,10 @@ def infer(
     }
     write_netcdf(idata, out / "posterior.nc")
     write_atomic_text(out / "summary.json", json.dumps(summary, indent=1, default=float))
-    state_path.unlink(missing_ok=True)
+    if result.convergence.converged:
+        state_path.unlink(missing_ok=True)
+    else:  # kept: a resumed run with a larger step limit continues the same chain
+        log(f"{code}: sampler state kept in {state_path}: --resume with a larger --max-steps continues it")
     log(f"{code}: wrote {out / 'posterior.nc'} and summary.json")
     return summary
 
@@ -411,8 +414,9 @@ def run_bundled(
     """The main job: :func:`infer` on every bundled dataset, then metrics, figures, ranking and
     ``out_dir/index.md`` (:func:`report_results`).
 
-    A material whose ``summary.json`` exists is not redone (delete it to redo); one with a saved sampler state
-    resumes. ``jobs`` materials run at once, each in its own process (spawned: JAX must not be forked), with
+    A material whose ``summary.json`` exists is not redone (delete it to redo), unless its chain is unconverged,
+    its sampler state was kept and ``max_steps`` now allows more steps: then, like a run that was interrupted,
+    it resumes. ``jobs`` materials run at once, each in its own process (spawned: JAX must not be forked), with
     per-chunk log lines instead of progress bars. ``kwargs`` go to :func:`infer`.
     """
     out_dir = Path(out_dir)
@@ -421,10 +425,14 @@ def run_bundled(
     for code in materials:
         done = out_dir / code / "summary.json"
         if done.exists():
-            log(f"{code}: {done} exists, skipped")
-            summaries[code] = json.loads(done.read_text())
-        else:
-            todo.append(code)
+            summary = json.loads(done.read_text())
+            more = summary.get("steps", 0) < kwargs.get("max_steps", DEFAULT_MAX_STEPS)
+            if summary["convergence"]["converged"] or not more or not (out_dir / code / "sampler_state.npz").exists():
+                log(f"{code}: {done} exists, skipped")
+                summaries[code] = summary
+                continue
+            log(f"{code}: not converged at {summary['steps']} steps; resuming with a larger step limit")
+        todo.append(code)
 
     def finished(code, summary):
         summaries[code] = summary
@@ -450,6 +458,7 @@ def run_bundled(
 __all__ = [
     "ALL_TESTS",
     "BUNDLED_MATERIALS",
+    "DEFAULT_MAX_STEPS",
     "DEFAULT_TESTS",
     "index_markdown",
     "infer",

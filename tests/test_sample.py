@@ -140,6 +140,10 @@ def test_resume_continues_bit_identically(tmp_path):
     np.testing.assert_array_equal(rest.chain[:80], first.chain)
     np.testing.assert_array_equal(rest.chain, whole.chain)
     np.testing.assert_array_equal(rest.log_prob, whole.log_prob)
+    # Resumed at the limit it already reached: the saved chain's own figures, not a warm-up message.
+    again = sample(g, g.mean, 0.05 * np.eye(3), max_steps=120, state_path=state, resume=True, **kw)
+    np.testing.assert_array_equal(again.chain, whole.chain)
+    np.testing.assert_array_equal(again.convergence.rhat, whole.convergence.rhat)
 
 
 def test_resume_refuses_a_state_of_another_run(tmp_path):
@@ -215,7 +219,16 @@ def test_killed_fit_resumes_without_losing_a_chunk(tmp_path):
     summary = json.loads((out / "TP" / "summary.json").read_text())
     assert summary["resumed_from_step"] == saved_now and saved_now % 40 == 0
     assert f"resumed from {state} at step {saved_now}" in done.stdout
-    assert (out / "TP" / "posterior.nc").exists() and not state.exists()
+    assert (out / "TP" / "posterior.nc").exists()
+    # An unconverged run keeps its state, and a larger step limit continues the same chain; a converged one
+    # leaves none.
+    assert state.exists() != summary["convergence"]["converged"]
+    if state.exists():
+        more = cmd[: cmd.index("--max-steps") + 1] + ["280"] + cmd[cmd.index("--max-steps") + 2 :]
+        extended = subprocess.run(more + ["--resume", "--json"], capture_output=True, text=True, env=env, timeout=900)
+        assert extended.returncode == 0, extended.stdout[-2000:] + extended.stderr[-2000:]
+        assert json.loads(extended.stdout.strip().splitlines()[-1])["steps"] == 280
+        assert json.loads((out / "TP" / "summary.json").read_text())["resumed_from_step"] == 240
     # The result file: all six groups, provenance attrs, pointwise arrays aligned with the observed bins.
     import arviz as az
 
