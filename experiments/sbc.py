@@ -1,13 +1,16 @@
 """Simulation-based calibration of the inference chain: coverage table and rank histograms.
 
     python experiments/sbc.py [--replicates 100] [--out experiments/sbc] [--seed 20261123] [--walkers 16]
+                              [--exact-inputs]
 
 Each replicate draws parameters from the prior, runs the virtual rig with them and infers them with the same
 posterior-mode start and emcee sampler as ``peano-bayes fit`` (see ``peano_bayes.inference.calibration`` for the
 reduced problem). Replicates are appended to ``OUT/replicates.jsonl`` as they finish, so an interrupted study
 continues where it stopped; the summary (``OUT/coverage.csv``, ``OUT/SBC.md``, ``OUT/ranks.png``) is
-rewritten atomically at the end. Target: 90 % intervals cover 85-95 % of the truths. The last line printed is
-one JSON object.
+rewritten atomically at the end. ``--exact-inputs`` runs the same study with noiseless strain and pressure
+sensors (a control: the likelihood treats the denoised inputs as exact, so the gap between the two studies'
+coverage is what the inputs' fitting error costs). Target: 90 % intervals cover 85-95 % of the truths. The
+last line printed is one JSON object.
 """
 
 from __future__ import annotations
@@ -35,13 +38,14 @@ from peano_bayes.inference.results import write_atomic_text
 TARGET = (0.85, 0.95)
 
 
-def load_done(path: Path, seed: int) -> dict[int, dict]:
+def load_done(path: Path, seed: int, exact_inputs: bool = False) -> dict[int, dict]:
+    """Finished replicates of the study (``seed``, ``exact_inputs``) in ``path``, by index."""
     done = {}
     if path.exists():
         for line in path.read_text().splitlines():
             if line.strip():
                 row = json.loads(line)
-                if row.get("seed") == seed:
+                if row.get("seed") == seed and row.get("exact_inputs", False) == exact_inputs:
                     done[row["index"]] = row
     return done
 
@@ -53,7 +57,7 @@ def append_line(path: Path, row: dict) -> None:
         os.fsync(fh.fileno())
 
 
-def markdown(rows: list[dict], replicates: list[dict], seed: int, seconds: float) -> str:
+def markdown(rows: list[dict], replicates: list[dict], seed: int, seconds: float, exact_inputs: bool = False) -> str:
     n = len(replicates)
     converged = sum(r["converged"] for r in replicates)
     lines = [
@@ -61,7 +65,8 @@ def markdown(rows: list[dict], replicates: list[dict], seed: int, seconds: float
         "",
         f"{n} replicates (root seed {seed}), TP load cycles, three free physics parameters and the load cell's "
         f"noise scale (`peano_bayes.inference.calibration`). Each replicate: truth from the prior, data from the "
-        f"virtual rig, posterior-mode start from the prior median, emcee to the convergence gates "
+        f"virtual rig{' with noiseless strain and pressure sensors (exact inputs)' if exact_inputs else ''}, "
+        f"posterior-mode start from the prior median, emcee to the convergence gates "
         f"({converged} of {n} converged; the rest stopped at the step limit and are counted as they are). "
         f"Coverage: fraction of truths inside the central interval of the posterior draws, with 95 % Wilson "
         f"intervals; target for 90 %: {TARGET[0]:.2f}-{TARGET[1]:.2f}. Rank p: chi-square of the truth's rank among "
@@ -107,21 +112,24 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=int, default=20261123)
     parser.add_argument("--walkers", type=int, default=16)
     parser.add_argument("--max-steps", type=int, default=4000)
+    parser.add_argument("--exact-inputs", action="store_true", help="noiseless strain and pressure sensors")
     args = parser.parse_args(argv)
     if args.replicates < 1 or args.walkers < 4 or args.max_steps < 1:
         print("sbc.py: error: --replicates, --max-steps >= 1 and --walkers >= 4 are required", file=sys.stderr)
         return 2
     args.out.mkdir(parents=True, exist_ok=True)
     lines = args.out / "replicates.jsonl"
-    done = load_done(lines, args.seed)
+    done = load_done(lines, args.seed, args.exact_inputs)
     t0 = time.perf_counter()
     base = base_posterior()
     todo = [i for i in range(args.replicates) if i not in done]
     if done:
         print(f"resuming: {len(done)} replicates already in {lines}")
     for i in tqdm(todo, desc="SBC replicates"):
-        rep = run_replicate(base, i, seed=args.seed, n_walkers=args.walkers, max_steps=args.max_steps)
-        row = {"seed": args.seed, **rep.as_dict()}
+        rep = run_replicate(
+            base, i, seed=args.seed, n_walkers=args.walkers, max_steps=args.max_steps, exact_inputs=args.exact_inputs
+        )
+        row = {"seed": args.seed, "exact_inputs": args.exact_inputs, **rep.as_dict()}
         append_line(lines, row)
         done[i] = row
     replicates = [done[i] for i in range(args.replicates)]
@@ -130,11 +138,12 @@ def main(argv=None) -> int:
     seconds = time.perf_counter() - t0 + sum(r["seconds"] for r in replicates if r["index"] not in todo)
     flat = [{k: (json.dumps(v) if isinstance(v, list) else v) for k, v in row.items()} for row in rows]
     write_atomic_text(args.out / "coverage.csv", pd.DataFrame(flat).to_csv(index=False))
-    write_atomic_text(args.out / "SBC.md", markdown(rows, replicates, args.seed, seconds))
+    write_atomic_text(args.out / "SBC.md", markdown(rows, replicates, args.seed, seconds, args.exact_inputs))
     rank_figure(replicates, names, args.out / "ranks")
     print((args.out / "SBC.md").read_text())
     summary = {
         "replicates": len(replicates),
+        "exact_inputs": args.exact_inputs,
         "converged": int(sum(r["converged"] for r in replicates)),
         "coverage_90": {r["parameter"]: r["coverage_0.9"] for r in rows},
         "within_target": all(TARGET[0] <= r["coverage_0.9"] <= TARGET[1] for r in rows),

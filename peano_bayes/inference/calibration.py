@@ -14,6 +14,7 @@ the load cell's noise scale; the rest at nominal values.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 
@@ -37,10 +38,14 @@ LEVELS = (0.5, 0.9, 0.94)
 RANK_DRAWS = 99
 
 
-def simulate(params: dict, seed: int):
+def simulate(params: dict, seed: int, exact_inputs: bool = False):
     """The SBC protocol's rig dataset from model and noise parameters [SI] (``NOISE_NAME`` sets the load
-    cell's noise; the other sensors keep the rig's defaults)."""
+    cell's noise; the other sensors keep the rig's defaults, or with ``exact_inputs`` the strain and pressure
+    sensors are noiseless, so the denoised driving inputs are exact)."""
     model = {k: v for k, v in params.items() if k != NOISE_NAME}
+    noise = RigNoise(force_sd_n=float(params[NOISE_NAME]))
+    if exact_inputs:
+        noise = dataclasses.replace(noise, strain_sd=0.0, pressure_sd_pa=0.0)
     return simulate_dataset(
         SBC_MATERIAL,
         model,
@@ -49,7 +54,7 @@ def simulate(params: dict, seed: int):
         repeats=1,
         specimen_spread=0.0,
         tests=("load_cycle",),
-        noise=RigNoise(force_sd_n=float(params[NOISE_NAME])),
+        noise=noise,
     )
 
 
@@ -91,9 +96,11 @@ def run_replicate(
     warmup: int = 200,
     chunk: int = 250,
     max_steps: int = 4000,
+    exact_inputs: bool = False,
 ) -> Replicate:
-    """Replicate ``index`` of the study with root ``seed``: truth from the prior, data from the rig, inference
-    from the prior median (never the truth), ranks and coverage."""
+    """Replicate ``index`` of the study with root ``seed``: truth from the prior, data from the rig (see
+    :func:`simulate` for ``exact_inputs``), inference from the prior median (never the truth), ranks and
+    coverage."""
     t0 = time.perf_counter()
     rng = np.random.default_rng([seed, index])
     prior = base.prior
@@ -102,7 +109,7 @@ def run_replicate(
         truth = prior.sample(rng, 1)[0]
         params = {**base.fixed, **{k: float(v) for k, v in prior.from_unconstrained(truth).items()}}
         try:
-            data = simulate(params, seed=int(rng.integers(2**31)))
+            data = simulate(params, seed=int(rng.integers(2**31)), exact_inputs=exact_inputs)
             break
         except RigSimulationError:  # the rig refuses a simulation whose solver misses its tolerance
             redraws += 1
