@@ -408,6 +408,13 @@ def _infer_bundled(code: str, out_dir: str, kwargs: dict) -> dict:
     return infer(BUNDLED_DIR / f"{code}.csv", out_dir, resume=resume, **kwargs)
 
 
+def _can_continue(summary: dict, directory: Path, max_steps: int) -> bool:
+    """Whether a finished material's chain is worth resuming: unconverged, its sampler state kept, and
+    ``max_steps`` beyond the steps it ran."""
+    unconverged = not summary["convergence"]["converged"]
+    return unconverged and summary.get("steps", 0) < max_steps and (directory / "sampler_state.npz").exists()
+
+
 def run_bundled(
     out_dir: str | Path = "results", *, materials=BUNDLED_MATERIALS, jobs: int = 1, log=print, **kwargs
 ) -> list[dict]:
@@ -420,14 +427,14 @@ def run_bundled(
     per-chunk log lines instead of progress bars. ``kwargs`` go to :func:`infer`.
     """
     out_dir = Path(out_dir)
+    max_steps = kwargs.get("max_steps", DEFAULT_MAX_STEPS)
     summaries: dict[str, dict] = {}
     todo = []
     for code in materials:
         done = out_dir / code / "summary.json"
         if done.exists():
             summary = json.loads(done.read_text())
-            more = summary.get("steps", 0) < kwargs.get("max_steps", DEFAULT_MAX_STEPS)
-            if summary["convergence"]["converged"] or not more or not (out_dir / code / "sampler_state.npz").exists():
+            if not _can_continue(summary, out_dir / code, max_steps):
                 log(f"{code}: {done} exists, skipped")
                 summaries[code] = summary
                 continue

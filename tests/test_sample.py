@@ -260,3 +260,14 @@ def test_killed_fit_resumes_without_losing_a_chunk(tmp_path):
     reference = json.loads((out / "TP" / "reference_models.json").read_text())
     assert "| Sarosi static, 12 coefficients |" in index and "| Veale force balance |" in index
     assert all(0.0 < reference[m]["quality"]["rmse"] < 50.0 for m in ("sarosi", "veale"))
+
+
+def test_main_job_continues_only_an_unconverged_material_with_kept_state_and_steps_left(tmp_path):
+    from peano_bayes.pipeline import _can_continue
+
+    unconverged = {"convergence": {"converged": False}, "steps": 20000}
+    assert not _can_continue(unconverged, tmp_path, 40000)  # no sampler state kept
+    (tmp_path / "sampler_state.npz").write_bytes(b"")
+    assert _can_continue(unconverged, tmp_path, 40000)
+    assert not _can_continue(unconverged, tmp_path, 20000)  # the limit allows no more steps
+    assert not _can_continue({"convergence": {"converged": True}, "steps": 5000}, tmp_path, 40000)
