@@ -405,6 +405,8 @@ def discover_command(args):
     written = write_report(result, Path(args.out))
     report = result.report
     say(f"verdict: {report['verdict']}" + (f" ({', '.join(report['named'])})" if report["named"] else ""))
+    if report["described"]:
+        say(f"slow structure over the session, described by {', '.join(report['described'])}, names no effect")
     say(f"wrote {', '.join(str(p) for p in written)}")
     return report
 

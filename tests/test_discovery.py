@@ -18,9 +18,24 @@ from peano_bayes.cli import main
 from peano_bayes.data import save
 from peano_bayes.discovery import LIBRARY, discover, discovery_data
 from peano_bayes.discovery.diagnose import diagnose, signature_statistic
-from peano_bayes.discovery.effects import CONFUSABLE, NOISE_EFFECTS, PHYSICS_EFFECTS
+from peano_bayes.discovery.effects import (
+    BASELINE_PARAMETERS,
+    CONFUSABLE,
+    EXTRA_PARAMETERS,
+    FLEXIBLE_TERMS,
+    NOISE_EFFECTS,
+    PHYSICS_EFFECTS,
+)
+from peano_bayes.discovery.fitting import _pointwise
 from peano_bayes.discovery.harness import TRUTH_CONFIG, TRUTH_PARAMS, Case, hidden_dataset, score
-from peano_bayes.discovery.model import NAMES, SUPERSET_CONFIG, model_spec, to_unconstrained, to_values
+from peano_bayes.discovery.model import (
+    DEFAULT_BASE,
+    NAMES,
+    SUPERSET_CONFIG,
+    model_spec,
+    to_unconstrained,
+    to_values,
+)
 from peano_bayes.inference.calibration import wilson_interval
 from peano_bayes.inference.likelihood import predict
 
@@ -45,6 +60,7 @@ DESIGN_EFFECTS = (
 def test_library_has_every_design_effect_and_noise_alternatives():
     assert set(DESIGN_EFFECTS) == set(PHYSICS_EFFECTS)
     assert {"sensor_offset", "sensor_gain", "heteroscedastic_noise"} <= set(NOISE_EFFECTS)
+    assert FLEXIBLE_TERMS == ("session_baseline",) and not set(FLEXIBLE_TERMS) & set(PHYSICS_EFFECTS)
     for effect in LIBRARY.values():
         assert set(effect.off) <= set(effect.params), effect.name
         assert set(effect.strength) <= set(effect.off), effect.name
@@ -75,6 +91,29 @@ def test_model_spec_pins_inactive_effects_at_off():
     }
 
 
+def test_session_baseline_adds_legendre_polynomials_of_session_time_to_the_force_only():
+    """The flexible baseline: force bins shift by c1 P1(s) + c2 P2(s) + c3 P3(s), with s the bin's session time
+    scaled to [-1, 1]; strain bins do not move; at off (all zero) nothing moves."""
+    split = discovery_data(hidden_dataset(Case(), seed=103), tests=QUASI_STATIC)
+    x0 = model_spec(DEFAULT_BASE, TRUTH_PARAMS).pinned
+    x1 = x0.copy()
+    c = {"baseline_p1_n": 0.3, "baseline_p2_n": -0.2, "baseline_p3_n": 0.1}
+    for name, value in c.items():
+        x1[NAMES.index(name)] = value
+    data = split.both
+    shift = np.asarray(_pointwise(x1, data)[3]) - np.asarray(_pointwise(x0, data)[3])
+    s = np.concatenate([np.ravel(a) for a in data.session])
+    session_s = np.concatenate([split.fit_covariates.session_s, split.held_out_covariates.session_s])
+    assert s.min() >= -1.0 and s.max() <= 1.0 and s.max() - s.min() > 1.9
+    np.testing.assert_allclose(s, np.polyval(np.polyfit(session_s, s, 1), session_s), atol=1e-9)  # affine in time
+    expected = 0.3 * s - 0.2 * 0.5 * (3 * s**2 - 1) + 0.1 * 0.5 * (5 * s**3 - 3 * s)
+    test = np.concatenate([split.fit_covariates.test, split.held_out_covariates.test])
+    force = np.isin(test, ("load_cycle", "blocking"))
+    np.testing.assert_allclose(shift[force], expected[force], atol=1e-9)
+    np.testing.assert_allclose(shift[~force], 0.0, atol=1e-12)
+    assert set(BASELINE_PARAMETERS) == set(c) and all(LIBRARY["session_baseline"].off[p] == 0.0 for p in c)
+
+
 @pytest.fixture(scope="module")
 def hysteresis_data():
     return hidden_dataset(Case(("hysteresis",), 4.0), seed=100)
@@ -86,7 +125,7 @@ def test_superset_at_off_equals_the_model_without_the_elements(hysteresis_data):
     split = discovery_data(hidden_dataset(Case(), seed=101))
     spec = model_spec(("tensile_stiffness", "bending_stiffness"), TRUTH_PARAMS)
     params = dict(zip(NAMES, spec.pinned, strict=True))
-    for name in ("cyclic_softening_fraction", "sensor_offset_n", "sensor_gain", "noise_slope_per_n"):
+    for name in EXTRA_PARAMETERS:
         params.pop(name)
     for group in split.fit.groups:
         if group.test not in ("load_cycle", "step"):
@@ -201,6 +240,7 @@ def test_residual_panels_keep_the_base_noise_units_when_a_noise_effect_widens_th
         rate_sign=np.array([1.0, 1.0, 1.0, -1.0, -1.0, -1.0]),
         time_since_step_s=np.full(n, np.nan),
         cycle=np.zeros(n, dtype=int),
+        session_s=np.arange(n, dtype=float),
     )
     error = np.array([4.0, -2.0, 6.0, 0.0, 8.0, -4.0])  # observed - predicted [N], the same misfit in both models
     base_sd, widened_sd = 2.0, 20.0

@@ -74,7 +74,8 @@ class SplitData:
 
     @property
     def both(self) -> DiscoveryData:
-        return replace(self.fit, groups=self.fit.groups + self.held_out.groups, sd=self.fit.sd + self.held_out.sd)
+        fit, held = self.fit, self.held_out
+        return replace(fit, groups=fit.groups + held.groups, sd=fit.sd + held.sd, session=fit.session + held.session)
 
     @property
     def n_fit_bins(self) -> int:
@@ -234,7 +235,13 @@ def discovery_data(
     def build(flag):
         groups = tuple(parts[flag][0])
         sd = tuple(noise[g.test] / np.sqrt(g.counts) for g in groups)
-        return DiscoveryData(groups, sd, n_cycles, dataset.geometry), _covariates(groups, parts[flag][1], session_start)
+        starts = [np.array([session_start[k] for k in g.keys])[:, None] for g in groups]
+        session = tuple(
+            2.0 * (np.asarray(g.bin_time_s) + t0) / max(elapsed, 1e-9) - 1.0
+            for g, t0 in zip(groups, starts, strict=True)
+        )
+        data = DiscoveryData(groups, sd, session, n_cycles, dataset.geometry)
+        return data, _covariates(groups, parts[flag][1], session_start)
 
     (fit, fit_cov), (held, held_cov) = build(False), build(True)
     return SplitData(

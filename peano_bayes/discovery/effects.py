@@ -7,7 +7,9 @@ effect is accepted, and ``signature`` the residual pattern its absence leaves (:
 
 Physics effects are elements of :class:`~peano_bayes.physics.ModelConfig` (or, for ``cyclic_softening``, a
 per-cycle stiffness factor); noise-side effects change only the sensor or the noise model, so that a sensor
-problem is never reported as physics.
+problem is never reported as physics. The one flexible term, ``session_baseline``, describes slow structure
+against time in the session that no library effect produces (research/DISCREPANCY.md section 5: a flexible
+term may compete, but never names an effect); the workflow reports it as unexplained structure.
 """
 
 from __future__ import annotations
@@ -29,7 +31,19 @@ EXTRA_PARAMETERS: dict[str, Parameter] = {
     "noise_slope_per_n": Parameter(
         "1/N", "heteroscedastic force noise: sd = sd0 (1 + slope |F|)", 0.02, (0.0, 10.0), 0.0
     ),
+    **{
+        f"baseline_p{k}_n": Parameter(
+            "N",
+            f"slow force baseline: coefficient of the degree-{k} Legendre polynomial of session time",
+            0.0,
+            (-20.0, 20.0),
+            0.0,
+        )
+        for k in (1, 2, 3)
+    },
 }
+#: Coefficients of the flexible session baseline, degree 1 to 3 (length scale about a third of the session).
+BASELINE_PARAMETERS: tuple[str, ...] = ("baseline_p1_n", "baseline_p2_n", "baseline_p3_n")
 
 
 def parameter_spec(name: str) -> Parameter:
@@ -41,7 +55,8 @@ def parameter_spec(name: str) -> Parameter:
 class Effect:
     """One candidate effect.
 
-    **Fields:** ``name`` (DESIGN.md section 5); ``meaning``; ``kind`` ``"physics"`` or ``"noise"``;
+    **Fields:** ``name`` (DESIGN.md section 5); ``meaning``; ``kind`` ``"physics"``, ``"noise"`` or
+    ``"flexible"`` (describes structure, never named);
     ``params`` the parameters it frees; ``off`` name -> value at which it changes nothing (the others of
     ``params`` are held at ``hold`` while inactive); ``start`` name -> weak but non-zero value its screening
     fit starts from; ``strength`` the parameters tested against ``off``; ``signature`` the residual pattern
@@ -51,7 +66,7 @@ class Effect:
 
     name: str
     meaning: str
-    kind: Literal["physics", "noise"]
+    kind: Literal["physics", "noise", "flexible"]
     params: tuple[str, ...]
     off: MappingProxyType
     start: MappingProxyType
@@ -230,6 +245,18 @@ _LIST = (
         "noise_level",
         ("load_cycle", "blocking"),
     ),
+    _effect(
+        "session_baseline",
+        "a slow force baseline over the session (a cubic in session time): structure no library effect "
+        "produces, such as sensor drift; described, never named",
+        "flexible",
+        BASELINE_PARAMETERS,
+        {p: 0.0 for p in BASELINE_PARAMETERS},
+        {"baseline_p1_n": 0.01, "baseline_p2_n": 0.0, "baseline_p3_n": 0.0},
+        BASELINE_PARAMETERS,
+        "session_trend",
+        ("load_cycle", "blocking"),
+    ),
 )
 
 #: name -> :class:`Effect`, every candidate the workflow screens.
@@ -238,6 +265,8 @@ LIBRARY: MappingProxyType = MappingProxyType({e.name: e for e in _LIST})
 PHYSICS_EFFECTS: tuple[str, ...] = tuple(e.name for e in _LIST if e.kind == "physics")
 #: Noise-side alternatives: never reported as physics.
 NOISE_EFFECTS: tuple[str, ...] = tuple(e.name for e in _LIST if e.kind == "noise")
+#: Flexible terms: they describe leftover structure and never name an effect.
+FLEXIBLE_TERMS: tuple[str, ...] = tuple(e.name for e in _LIST if e.kind == "flexible")
 
 #: Pairs the rig's four tests cannot always tell apart, and the experiment that separates them
 #: (research/DISCREPANCY.md section 2). An ``ambiguous`` verdict names one of these.
@@ -270,9 +299,11 @@ def check_effects(names) -> tuple[str, ...]:
 
 
 __all__ = [
+    "BASELINE_PARAMETERS",
     "CONFUSABLE",
     "EXTRA_PARAMETERS",
     "Effect",
+    "FLEXIBLE_TERMS",
     "LIBRARY",
     "NOISE_EFFECTS",
     "OPEN_ORIFICE_M2",

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..inference.likelihood import OBSERVED, SOLVER_TOLERANCE, SPECIMEN_OFFSET, RunGroup, predict
 from ..physics import Geometry, ModelConfig
-from .effects import EXTRA_PARAMETERS, LIBRARY, check_effects, parameter_spec
+from .effects import BASELINE_PARAMETERS, EXTRA_PARAMETERS, LIBRARY, check_effects, parameter_spec
 
 #: Every element any library effect needs, switched on; inactive ones are pinned at their off values.
 SUPERSET_CONFIG = ModelConfig(
@@ -119,16 +119,26 @@ class DiscoveryData:
     """Binned runs of one specimen, as a pytree (one compiled model serves every dataset of the same shape).
 
     **Fields:** ``groups`` run groups whose ``specimen_index`` is the run's cycle index (0 = first run of its
-    condition), ``sd`` per group (r, m) the noise sd of each bin mean [signal unit], ``geometry``.
+    condition), ``sd`` per group (r, m) the noise sd of each bin mean [signal unit], ``session`` per group
+    (r, m) each bin's time in the specimen's session scaled to [-1, 1] (the session baseline's argument),
+    ``geometry``.
     """
 
     groups: tuple[RunGroup, ...]
     sd: tuple
+    session: tuple
     n_cycles: int
     geometry: Geometry
 
 
-jax.tree_util.register_dataclass(DiscoveryData, data_fields=["groups", "sd"], meta_fields=["n_cycles", "geometry"])
+jax.tree_util.register_dataclass(
+    DiscoveryData, data_fields=["groups", "sd", "session"], meta_fields=["n_cycles", "geometry"]
+)
+
+
+def _legendre(s):
+    """Legendre polynomials of degree 1, 2, 3 of ``s`` in [-1, 1]."""
+    return s, 0.5 * (3.0 * s**2 - 1.0), 0.5 * (5.0 * s**3 - 3.0 * s)
 
 
 def predictions(x, data: DiscoveryData):
@@ -137,12 +147,14 @@ def predictions(x, data: DiscoveryData):
     a = params.pop("cyclic_softening_fraction")
     offset, gain = params.pop("sensor_offset_n"), params.pop("sensor_gain")
     slope = params.pop("noise_slope_per_n")
+    baseline = [params.pop(name) for name in BASELINE_PARAMETERS]
     params[SPECIMEN_OFFSET] = jnp.log1p(a * jnp.exp(-jnp.arange(data.n_cycles, dtype=float)))
     out = []
-    for group, sd in zip(data.groups, data.sd, strict=True):
+    for group, sd, session in zip(data.groups, data.sd, data.session, strict=True):
         predicted, error = predict(params, group, config=SUPERSET_CONFIG, geometry=data.geometry)
         if group.test in FORCE_TESTS:
-            predicted = gain * predicted + offset
+            drift = sum(c * p for c, p in zip(baseline, _legendre(jnp.asarray(session)), strict=True))
+            predicted = gain * predicted + offset + drift
             sd = sd * (1.0 + slope * jnp.abs(predicted))
         out.append((predicted, sd, error))
     return out

@@ -42,6 +42,7 @@ def covariate_panels(result) -> list[dict]:
         ("predicted force [N]", result.before.predicted, force),
         ("time since the step [s]", np.nan_to_num(cov.time_since_step_s), step),
         ("cycle index [-]", cov.cycle.astype(float), np.ones_like(force)),
+        ("time in the session [s]", cov.session_s, force),
     ]
     # Both models' residuals in the base model's noise units: a noise-side effect (heteroscedastic noise)
     # widens the final model's own sd, and its standardized residuals would hide the misfit it absorbed.
@@ -67,9 +68,11 @@ def residual_figure(result, path_stem: Path) -> list[Path]:
     """Residuals of the base and the final model against every covariate, one panel each."""
     panels = covariate_panels(result)
     with plt.rc_context(plots.STYLE):
-        fig, axes = plt.subplots(2, 3, figsize=(11, 6.5), constrained_layout=True)
-        for ax, panel in zip(axes.ravel(), panels, strict=True):
+        fig, axes = plt.subplots(2, 4, figsize=(14, 6.5), constrained_layout=True)
+        for ax, panel in zip(axes.ravel(), panels, strict=False):
             plots.residuals_against(ax, panel["x"], panel["before"], panel["after"], xlabel=panel["xlabel"])
+        for ax in axes.ravel()[len(panels) :]:
+            ax.set_axis_off()
         axes[0, 0].legend(loc="best", markerscale=4)
         added = [e for e in result.report["final_model"] if e not in result.report["base"]]
         fig.suptitle(
@@ -96,6 +99,14 @@ def report_markdown(report: dict) -> str:
             )
             for rival, experiment in a["experiment"].items():
                 lines.append(f"- To separate them from {rival}: {experiment}.")
+    elif verdict == "unexplained" and report.get("described"):
+        lines.append(
+            "**Verdict: unexplained.** The force drifts slowly over the session in a way no effect in the "
+            "library produces; a smooth baseline over session time describes it (step "
+            f"{', '.join(f'`{d}`' for d in report['described'])} below), but it names no physics. A load-cell "
+            "drift or a slow change of the specimen are likely: re-zero the load cell between tests, or repeat "
+            "the first test at the end of the session."
+        )
     elif verdict == "unexplained":
         lines.append(
             "**Verdict: unexplained.** The residuals keep structure that no effect in the library explains "
@@ -104,6 +115,11 @@ def report_markdown(report: dict) -> str:
         )
     else:
         lines.append("**Verdict: none.** No effect beyond the base model is supported by the data.")
+    if report.get("described") and verdict != "unexplained":
+        lines.append(
+            "\nThe force also drifts slowly over the session (described by a smooth baseline, "
+            f"{', '.join(report['described'])}; no library effect explains it)."
+        )
     if report["noise_model"]:
         lines.append(f"\nThe sensor or noise model needed: {', '.join(report['noise_model'])} (not physics).")
     lines += ["", f"Base model: {' + '.join(report['base'])}. Final model: {' + '.join(report['final_model'])}.", ""]
