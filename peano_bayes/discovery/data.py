@@ -235,13 +235,12 @@ def discovery_data(
     def build(flag):
         groups = tuple(parts[flag][0])
         sd = tuple(noise[g.test] / np.sqrt(g.counts) for g in groups)
-        starts = [np.array([session_start[k] for k in g.keys])[:, None] for g in groups]
-        session = tuple(
-            2.0 * (np.asarray(g.bin_time_s) + t0) / max(elapsed, 1e-9) - 1.0
-            for g, t0 in zip(groups, starts, strict=True)
-        )
-        data = DiscoveryData(groups, sd, session, n_cycles, dataset.geometry)
-        return data, _covariates(groups, parts[flag][1], session_start)
+        cov = _covariates(groups, parts[flag][1], session_start)
+        # The covariates' flat order is every group's (r, m) bins raveled, one group after another.
+        scaled = 2.0 * cov.session_s / max(elapsed, 1e-9) - 1.0
+        cuts = np.cumsum([g.observed.size for g in groups])[:-1]
+        session = tuple(a.reshape(g.observed.shape) for a, g in zip(np.split(scaled, cuts), groups, strict=True))
+        return DiscoveryData(groups, sd, session, n_cycles, dataset.geometry), cov
 
     (fit, fit_cov), (held, held_cov) = build(False), build(True)
     return SplitData(

@@ -20,6 +20,8 @@ from typing import Literal
 
 from ..physics.model import PARAMETERS, Parameter
 
+#: Coefficients of the flexible session baseline, degree 1 to 3 (length scale about a third of the session).
+BASELINE_PARAMETERS: tuple[str, ...] = ("baseline_p1_n", "baseline_p2_n", "baseline_p3_n")
 #: Parameters of the discovery model that are not physics parameters (not in ``PARAMETERS``):
 #: unit, meaning, nominal, bounds, off; and the Gaussian regularizer (mean, sd) on the fitted scale.
 EXTRA_PARAMETERS: dict[str, Parameter] = {
@@ -32,18 +34,16 @@ EXTRA_PARAMETERS: dict[str, Parameter] = {
         "1/N", "heteroscedastic force noise: sd = sd0 (1 + slope |F|)", 0.02, (0.0, 10.0), 0.0
     ),
     **{
-        f"baseline_p{k}_n": Parameter(
+        name: Parameter(
             "N",
-            f"slow force baseline: coefficient of the degree-{k} Legendre polynomial of session time",
+            f"slow force baseline: coefficient of the degree-{degree} Legendre polynomial of session time",
             0.0,
             (-20.0, 20.0),
             0.0,
         )
-        for k in (1, 2, 3)
+        for degree, name in enumerate(BASELINE_PARAMETERS, 1)
     },
 }
-#: Coefficients of the flexible session baseline, degree 1 to 3 (length scale about a third of the session).
-BASELINE_PARAMETERS: tuple[str, ...] = ("baseline_p1_n", "baseline_p2_n", "baseline_p3_n")
 
 
 def parameter_spec(name: str) -> Parameter:

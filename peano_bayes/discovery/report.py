@@ -99,7 +99,7 @@ def report_markdown(report: dict) -> str:
             )
             for rival, experiment in a["experiment"].items():
                 lines.append(f"- To separate them from {rival}: {experiment}.")
-    elif verdict == "unexplained" and report.get("described"):
+    elif verdict == "unexplained" and report["described"]:
         lines.append(
             "**Verdict: unexplained.** The force drifts slowly over the session in a way no effect in the "
             "library produces; a smooth baseline over session time describes it (step "
@@ -115,7 +115,7 @@ def report_markdown(report: dict) -> str:
         )
     else:
         lines.append("**Verdict: none.** No effect beyond the base model is supported by the data.")
-    if report.get("described") and verdict != "unexplained":
+    if report["described"] and verdict != "unexplained":
         lines.append(
             "\nThe force also drifts slowly over the session (described by a smooth baseline, "
             f"{', '.join(report['described'])}; no library effect explains it)."

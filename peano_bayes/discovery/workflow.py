@@ -250,7 +250,6 @@ def discover(split: SplitData, *, base=DEFAULT_BASE, gates: Gates = Gates(), see
     diag = diagnose(cur_fit.r, split.fit_covariates, cur_fit.predicted, alpha=gates.alpha, seed=seed)
     diagnoses.append(_diagnosis_dict(diag))
     stopped = "max_effects"
-    iteration = 0
     while sum(s["kind"] != "flexible" for s in steps) < gates.max_effects:
         # Screen whether or not the diagnosis flags structure: the gates, not the diagnosis, decide.
         inactive = [e for e in LIBRARY if e not in current.spec.active]
@@ -269,7 +268,7 @@ def discover(split: SplitData, *, base=DEFAULT_BASE, gates: Gates = Gates(), see
         ]
         ranked += [e for e in inactive if e in FLEXIBLE_TERMS]
         say(
-            f"step {iteration + 1}: {'structure left' if diag.structure_left else 'no significant structure'}; "
+            f"step {len(steps) + 1}: {'structure left' if diag.structure_left else 'no significant structure'}; "
             f"refitting {', '.join(ranked)}"
         )
         fits = fit_models([specs[e] for e in ranked], [starts[e] for e in ranked], split.fit)
@@ -314,13 +313,12 @@ def discover(split: SplitData, *, base=DEFAULT_BASE, gates: Gates = Gates(), see
         }
         steps.append(step)
         say(
-            f"step {iteration + 1}: accepted {best.name} (delta elpd {best.evidence['delta_elpd']:.1f})"
+            f"step {len(steps) + 1}: accepted {best.name} (delta elpd {best.evidence['delta_elpd']:.1f})"
             + (f"; rivals within 2 se: {', '.join(rivals)}" if rivals else "")
         )
         current, cur_fit, cur_held = best.fit, best.fit_eval, best.held_eval
         diag = diagnose(cur_fit.r, split.fit_covariates, cur_fit.predicted, alpha=gates.alpha, seed=seed)
         diagnoses.append(_diagnosis_dict(diag))
-        iteration += 1
     named = [s["effect"] for s in steps if s["kind"] == "physics"]
     described = [s["effect"] for s in steps if s["kind"] == "flexible"]
     ambiguous = [{"effects": [s["effect"], *s["rivals"]], "experiment": s["experiment"]} for s in steps if s["rivals"]]
