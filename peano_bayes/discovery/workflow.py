@@ -313,7 +313,7 @@ def discover(split: SplitData, *, base=DEFAULT_BASE, gates: Gates = Gates(), see
         }
         steps.append(step)
         say(
-            f"step {len(steps) + 1}: accepted {best.name} (delta elpd {best.evidence['delta_elpd']:.1f})"
+            f"step {len(steps)}: accepted {best.name} (delta elpd {best.evidence['delta_elpd']:.1f})"
             + (f"; rivals within 2 se: {', '.join(rivals)}" if rivals else "")
         )
         current, cur_fit, cur_held = best.fit, best.fit_eval, best.held_eval
