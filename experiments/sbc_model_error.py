@@ -40,9 +40,9 @@ HERE = Path(__file__).resolve().parent
 LEVELS = (0.5, 0.9)
 
 
-def replay(base, row: dict, seed: int) -> tuple[np.ndarray, int]:
+def replay(base, row: dict) -> tuple[np.ndarray, int]:
     """The replicate's truth (D,) and rig seed, redrawn as :func:`run_replicate` drew them."""
-    rng = np.random.default_rng([seed, row["index"]])
+    rng = np.random.default_rng([row["seed"], row["index"]])
     for _ in range(row["redraws"] + 1):
         truth = base.prior.sample(rng, 1)[0]
         data_seed = int(rng.integers(2**31))
@@ -51,9 +51,9 @@ def replay(base, row: dict, seed: int) -> tuple[np.ndarray, int]:
     return truth, data_seed
 
 
-def model_error(base, truth: np.ndarray, data_seed: int, exact_inputs: bool) -> dict:
+def model_error(base, truth: np.ndarray, data_seed: int, exact_inputs: bool, prior_sd: np.ndarray) -> dict:
     """Model error of one replicate at its truth: residual figures [N] and the linearised bias ``z`` of each
-    free physics parameter in posterior sd."""
+    free physics parameter in posterior sd (``prior_sd`` (D,): the prior's sd in the sampled coordinates)."""
     prior = base.prior
     params = {**base.fixed, **{k: float(v) for k, v in prior.from_unconstrained(truth).items()}}
     sigma = params[NOISE_NAME]
@@ -73,7 +73,7 @@ def model_error(base, truth: np.ndarray, data_seed: int, exact_inputs: bool) -> 
     measured = np.isfinite(residual)
     jac = np.asarray(jax.jacfwd(prediction)(at_truth)).reshape(-1, len(SBC_FREE))[measured.ravel()]
     weight = 1.0 / sd[measured] ** 2
-    spread = np.std(prior.sample(np.random.default_rng(0), 4000), axis=0)[np.asarray(free)]
+    spread = prior_sd[np.asarray(free)]
     covariance = np.linalg.inv(jac.T @ (weight[:, None] * jac) + np.diag(1.0 / spread**2))
     delta = covariance @ (jac.T @ (weight * residual[measured]))
     return {
@@ -101,11 +101,12 @@ def main(argv=None) -> int:
     rows = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
     base = base_posterior()
     names = list(base.names)
+    prior_sd = np.std(base.prior.sample(np.random.default_rng(0), 4000), axis=0)
     table = []
     for row in rows:
-        truth, data_seed = replay(base, row, row["seed"])
+        truth, data_seed = replay(base, row)
         try:
-            figures = model_error(base, truth, data_seed, row.get("exact_inputs", False))
+            figures = model_error(base, truth, data_seed, row.get("exact_inputs", False), prior_sd)
         except RigSimulationError as err:
             print(f"replicate {row['index']}: {err}", file=sys.stderr)
             continue
