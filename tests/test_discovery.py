@@ -26,7 +26,7 @@ from peano_bayes.discovery.effects import (
     NOISE_EFFECTS,
     PHYSICS_EFFECTS,
 )
-from peano_bayes.discovery.fitting import _pointwise
+from peano_bayes.discovery.fitting import ModelFit, _pointwise
 from peano_bayes.discovery.harness import TRUTH_CONFIG, TRUTH_PARAMS, Case, hidden_dataset, score
 from peano_bayes.discovery.model import (
     DEFAULT_BASE,
@@ -36,6 +36,7 @@ from peano_bayes.discovery.model import (
     to_unconstrained,
     to_values,
 )
+from peano_bayes.discovery.workflow import strength_wald
 from peano_bayes.inference.calibration import wilson_interval
 from peano_bayes.inference.likelihood import predict
 
@@ -187,7 +188,10 @@ def test_discover_cli_names_hidden_hysteresis_and_shrinks_the_gap(hysteresis_dat
     last = capsys.readouterr().out.strip().splitlines()[-1]
     report = json.loads(last)
     assert report == json.loads((tmp_path / "out" / "report.json").read_text())
-    assert report["verdict"] == "named" and report["named"] == ["hysteresis"]
+    # Named first and alone; the verdict may be ambiguous with a pre-declared confusable rival (one strain rate
+    # cannot tell friction from a Maxwell loop), which the benchmark and research/DISCREPANCY.md count as right.
+    assert report["named"] == ["hysteresis"] and report["steps"][0]["effect"] == "hysteresis"
+    assert score(Case(("hysteresis",), 4.0), report)["correct"], report["verdict"]
     assert (tmp_path / "out" / "report.md").read_text().count("hysteresis") >= 2
     assert (tmp_path / "out" / "figures" / "residuals.png").stat().st_size > 10_000
     before = report["gap"]["before"]["load_cycle"]["held_out"]["rmse"]
@@ -251,3 +255,40 @@ def test_residual_panels_keep_the_base_noise_units_when_a_noise_effect_widens_th
     # A zero base residual leaves the sd of that bin unknown: that point is dropped, never shown as a fit.
     np.testing.assert_allclose(pressure["after"][0], [2.0, -1.0, 3.0, np.nan, 4.0, -2.0])
     np.testing.assert_allclose(pressure["before"][0], error / base_sd)
+
+
+def _fake_fit(values: dict, sd: dict, correlation: np.ndarray) -> ModelFit:
+    spec = model_spec(DEFAULT_BASE + ("nonlinear_damping",))
+    x = spec.pinned.copy()
+    for name, v in values.items():
+        x[NAMES.index(name)] = v
+    free = spec.free_names
+    corr = np.eye(len(free))
+    idx = [free.index(n) for n in values]
+    corr[np.ix_(idx, idx)] = correlation
+    return ModelFit(spec, x, x, 0.0, True, {n: sd.get(n, 1.0) for n in free}, corr)
+
+
+def test_strength_wald_reduces_to_the_marginal_z_for_one_parameter_and_is_joint_for_several():
+    damping = LIBRARY["nonlinear_damping"]
+    names = damping.strength
+    # One parameter free to move (the others uncorrelated and exactly at off): W = z^2, threshold z^2.
+    fit = _fake_fit({names[0]: 3.0, names[1]: 0.0, names[2]: 0.0}, {n: 1.5 for n in names}, np.eye(3))
+    w, _ = strength_wald(fit, names[:1], damping.off, 1.88)
+    assert w == pytest.approx(4.0, rel=1e-12)
+    _, threshold_one = strength_wald(fit, names[:1], damping.off, 1.88)
+    assert threshold_one == pytest.approx(1.88**2, rel=1e-9)
+    # Three strongly correlated parameters, each only 1.5 sd from off, all on the same side: the data pin their
+    # common direction, so the joint region excludes off although no marginal interval does.
+    corr = np.full((3, 3), -0.45) + 1.45 * np.eye(3)
+    fit = _fake_fit({n: 1.5 for n in names}, {n: 1.0 for n in names}, corr)
+    w, threshold = strength_wald(fit, names, damping.off, 1.88)
+    assert w > threshold > threshold_one
+    # Uncorrelated, each 1.5 sd: W = 3 * 1.5^2 = 6.75, below the 3-dof threshold (about 7.4).
+    fit = _fake_fit({n: 1.5 for n in names}, {n: 1.0 for n in names}, np.eye(3))
+    w, threshold = strength_wald(fit, names, damping.off, 1.88)
+    assert w == pytest.approx(6.75, rel=1e-12) and w < threshold
+    # A perfectly degenerate pair adds only its constrained direction (no blow-up from the singular matrix).
+    fit = _fake_fit({names[0]: 1.0, names[1]: 1.0, names[2]: 0.0}, {n: 1.0 for n in names}, np.ones((3, 3)))
+    w, _ = strength_wald(fit, names[:2], damping.off, 1.88)
+    assert w == pytest.approx(1.0, rel=1e-9)

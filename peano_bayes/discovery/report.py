@@ -137,12 +137,10 @@ def report_markdown(report: dict) -> str:
             f"{ev['signature_after']:.1f} (noise-level units).",
             "- Strength: "
             + ", ".join(f"`{p}` = {_fmt(v['value'])} ± {_fmt(v['sd'])}" for p, v in step["parameters"].items())
-            + f" ({', '.join(f'{k} {z:.1f} sd from off' for k, z in ev['strength_z'].items())}).",
+            + f" ({', '.join(f'{k} {z:.1f} sd from off' for k, z in ev['strength_z'].items())}; joint Wald "
+            f"statistic {ev['strength_wald']:.1f}, threshold {ev['strength_wald_threshold']:.1f}).",
+            f"- Largest correlation with a parameter already in the model: {ev['max_correlation_with_base']:.2f}.",
         ]
-        if ev["weakly_identified"]:
-            lines.append(
-                f"- Weakly identified: correlation {ev['max_correlation_with_base']:.2f} with a base parameter."
-            )
         if step["rivals"]:
             lines.append(f"- Rivals within two standard errors: {', '.join(step['rivals'])}.")
         lines.append("")
