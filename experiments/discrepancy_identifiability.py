@@ -4,7 +4,7 @@ The benchmark's SNR (peano_bayes.discovery.harness) is ``max over tests of RMS(y
 at *equal* base parameters, as research/DISCREPANCY.md section 4 defines it. Discovery, though, sees only what
 is left after the base model (tensile + bending stiffness, free) is refitted: the part of the effect's signal
 the base cannot mimic. This script measures that part. For each hideable effect at the strength the final
-benchmark used for SNR 2 (``experiments/discrepancy-4000/strengths.json``), it simulates the harness's rig data
+benchmark used for SNR 2 (``experiments/discrepancy-5000/strengths.json``), it simulates the harness's rig data
 with the load-cell noise shrunk ``--shrink`` times (so the fit sees the same relative weights of force and
 strain tests but noise does not blur the misfit), fits the base model from four starts and the base plus the
 hidden effect from the truth, and reports per test the RMS of the binned misfit on the fitted and held-out
@@ -82,11 +82,11 @@ def _nominal(effect: str, strength: float, split_tests) -> dict:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--strengths", default=str(HERE / "discrepancy-4000" / "strengths.json"))
+    parser.add_argument("--strengths", default=str(HERE / "discrepancy-5000" / "strengths.json"))
     parser.add_argument("--snr", type=float, default=2.0)
     parser.add_argument("--shrink", type=float, default=100.0, help="noise divisor of the simulated data")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--out", default=str(HERE / "discrepancy-4000"))
+    parser.add_argument("--out", default=str(HERE / "discrepancy-5000"))
     args = parser.parse_args(argv)
     enable_compilation_cache()
     strengths = json.loads(Path(args.strengths).read_text())
