@@ -274,9 +274,8 @@ def test_strength_wald_reduces_to_the_marginal_z_for_one_parameter_and_is_joint_
     names = damping.strength
     # One parameter free to move (the others uncorrelated and exactly at off): W = z^2, threshold z^2.
     fit = _fake_fit({names[0]: 3.0, names[1]: 0.0, names[2]: 0.0}, {n: 1.5 for n in names}, np.eye(3))
-    w, _ = strength_wald(fit, names[:1], damping.off, 1.88)
+    w, threshold_one = strength_wald(fit, names[:1], damping.off, 1.88)
     assert w == pytest.approx(4.0, rel=1e-12)
-    _, threshold_one = strength_wald(fit, names[:1], damping.off, 1.88)
     assert threshold_one == pytest.approx(1.88**2, rel=1e-9)
     # Three strongly correlated parameters, each only 1.5 sd from off, all on the same side: the data pin their
     # common direction, so the joint region excludes off although no marginal interval does.
