@@ -27,6 +27,7 @@ import argparse
 import hashlib
 import json
 import os
+import shutil
 import subprocess
 import sys
 import time
@@ -116,17 +117,25 @@ def _todo(out: Path, snrs, noise_levels, seeds: int, first_seed: int) -> list[tu
     ]
 
 
+def _claim(out: Path, run_key: str) -> bool:
+    """Atomically claim ``run_key`` for this worker (False if another worker has it): workers take runs from one
+    shared to-do list as they become free, so none idles while the other still has a long queue."""
+    try:
+        (out / "claims" / hashlib.md5(run_key.encode()).hexdigest()).touch(exist_ok=False)
+    except FileExistsError:
+        return False
+    return True
+
+
 def work(out: Path, snrs, noise_levels, seeds: int, first_seed: int, index: int, count: int) -> None:
-    """Worker ``index`` of ``count``: the runs not done yet whose key's MD5 first byte is ``index`` mod ``count``, each
-    appended to ``OUT/runs-<index>.jsonl`` as it finishes."""
+    """Worker ``index`` of ``count``: claim each run not done yet (see :func:`_claim`), run it and append it to
+    ``OUT/runs-<index>.jsonl`` as it finishes."""
     strengths = json.loads((out / "strengths.json").read_text())
-    todo = [
-        (c, s)
-        for c, s in _todo(out, snrs, noise_levels, seeds, first_seed)
-        if hashlib.md5(key(c, s).encode()).digest()[0] % count == index
-    ]
+    todo = _todo(out, snrs, noise_levels, seeds, first_seed)
     with open(out / f"runs-{index}.jsonl", "a") as fh:
         for i, (case, seed) in enumerate(todo, 1):
+            if not _claim(out, key(case, seed)):
+                continue
             by_case = {e: strengths[f"{e}@{case.snr:g}"] for e in case.effects}
             try:
                 row = _one(case, seed, by_case)
@@ -140,7 +149,7 @@ def work(out: Path, snrs, noise_levels, seeds: int, first_seed: int, index: int,
             fh.write(json.dumps(row) + "\n")
             fh.flush()
             print(
-                f"worker {index} [{i}/{len(todo)}] {row['label']} snr {row['snr']:g} seed {seed}: "
+                f"worker {index} (to-do item {i} of {len(todo)}) {row['label']} snr {row['snr']:g} seed {seed}: "
                 f"{row['outcome']} ({'right' if row['correct'] else 'WRONG'})",
                 flush=True,
             )
@@ -153,6 +162,9 @@ def run(out: Path, snrs, noise_levels, seeds: int, first_seed: int, jobs: int) -
     _calibrate(out, cases(snrs, noise_levels))
     todo = _todo(out, snrs, noise_levels, seeds, first_seed)
     print(f"{len(_read_rows(out))} runs done, {len(todo)} to go", flush=True)
+    # Claims of a stopped run are stale: its unfinished runs are in the to-do list again.
+    shutil.rmtree(out / "claims", ignore_errors=True)
+    (out / "claims").mkdir()
     common = [sys.executable, __file__, "--out", str(out), "--seeds", str(seeds), "--first-seed", str(first_seed),
               "--snr", *map(str, snrs), "--noise", *map(str, noise_levels)]  # fmt: skip
     procs = []
