@@ -27,7 +27,15 @@ from peano_bayes.discovery.effects import (
     PHYSICS_EFFECTS,
 )
 from peano_bayes.discovery.fitting import ModelFit, _pointwise
-from peano_bayes.discovery.harness import TRUTH_CONFIG, TRUTH_PARAMS, Case, hidden_dataset, score
+from peano_bayes.discovery.harness import (
+    HIDEABLE,
+    TRUTH_CONFIG,
+    TRUTH_PARAMS,
+    Case,
+    hidden_dataset,
+    score,
+    true_parameters,
+)
 from peano_bayes.discovery.model import (
     DEFAULT_BASE,
     NAMES,
@@ -229,6 +237,18 @@ def test_hidden_effect_validation_small():
     assert wilson_interval(false_positives, 3)[0] <= 0.15, outcomes
     drift_ok = sum(r["correct"] for c, r in rows if c == cases[2])
     assert wilson_interval(drift_ok, 3)[1] >= 0.8, outcomes
+
+
+def test_the_harness_hides_each_effect_in_that_effects_own_parameters_away_from_off():
+    """What the identifiability probe fits as the truth: the rig's parameters, with only the hidden effect's
+    parameters changed, and its strength parameters not at the library's off value."""
+    assert true_parameters((), {}) == dict(TRUTH_PARAMS)
+    for effect in HIDEABLE:
+        truth = true_parameters((effect,), {effect: 1.5})
+        changed = {k for k in truth if truth[k] != TRUTH_PARAMS.get(k)}
+        assert changed and changed <= set(LIBRARY[effect].params), (effect, changed)
+        for p in LIBRARY[effect].strength:
+            assert truth[p] != LIBRARY[effect].off[p], (effect, p)
 
 
 def test_residual_panels_keep_the_base_noise_units_when_a_noise_effect_widens_the_sd():

@@ -125,7 +125,7 @@ def _simulate(params: dict, quirks: tuple, seed: int, noise: RigNoise, drift: bo
     return dataclasses.replace(ds, runs=tuple(sorted(runs, key=lambda r: order[r.key])))
 
 
-def _params_quirks(effects: tuple[str, ...], strengths: dict) -> tuple[dict, tuple, float]:
+def _truth(effects: tuple[str, ...], strengths: dict) -> tuple[dict, tuple, float]:
     params, quirks, softening = dict(TRUTH_PARAMS), (), 0.0
     for e in effects:
         q, make = REFERENCE[e]
@@ -136,20 +136,35 @@ def _params_quirks(effects: tuple[str, ...], strengths: dict) -> tuple[dict, tup
     return params, quirks, softening
 
 
-def _snr(effect: str, s: float) -> float:
+def true_parameters(effects: tuple[str, ...], strengths: dict) -> dict:
+    """The hidden truth in the discovery model's parameter names (SI units): the rig's parameters with
+    ``effects`` at ``strengths`` (cyclic softening as ``cyclic_softening_fraction``)."""
+    params, _, softening = _truth(effects, strengths)
+    if softening:
+        params["cyclic_softening_fraction"] = softening
+    return params
+
+
+def snr_by_test(effect: str, strength: float) -> dict[str, float]:
+    """Per rig test: RMS(y_with - y_without) / sigma of ``effect`` at ``strength``, at equal base parameters,
+    noise-free (sigma: the rig's per-sample noise at :data:`REFERENCE_FORCE_SD_N`)."""
     quiet = RigNoise(0.0, 0.0, 0.0, 0.0, 0.0)
     without = _simulate(dict(TRUTH_PARAMS), (), 0, quiet, False, 0.0)
-    params, quirks, softening = _params_quirks((effect,), {effect: s})
+    params, quirks, softening = _truth((effect,), {effect: strength})
     with_ = _simulate(params, quirks, 0, quiet, False, softening)
     noise = rig_noise(REFERENCE_FORCE_SD_N)
-    best = 0.0
-    for test in {r.test for r in without.runs}:
+    out = {}
+    for test in sorted({r.test for r in without.runs}):
         signal = OBSERVED[test][0]
         sd = noise.force_sd_n if signal == "force_n" else noise.strain_sd
         a = np.concatenate([getattr(r, signal) for r in with_.runs if r.test == test])
         b = np.concatenate([getattr(r, signal) for r in without.runs if r.test == test])
-        best = max(best, float(np.sqrt(np.mean((a - b) ** 2))) / sd)
-    return best
+        out[test] = float(np.sqrt(np.mean((a - b) ** 2))) / sd
+    return out
+
+
+def _snr(effect: str, s: float) -> float:
+    return max(snr_by_test(effect, s).values())
 
 
 @functools.cache
@@ -169,7 +184,7 @@ def strength_for_snr(effect: str, snr: float, iterations: int = 12) -> float:
 def hidden_dataset(case: Case, seed: int, strengths: dict | None = None) -> Dataset:
     """The rig dataset of ``case`` (strengths by effect, default calibrated by :func:`strength_for_snr`)."""
     strengths = strengths or {e: strength_for_snr(e, case.snr) for e in case.effects}
-    params, quirks, softening = _params_quirks(case.effects, strengths)
+    params, quirks, softening = _truth(case.effects, strengths)
     return _simulate(params, quirks, seed, rig_noise(case.force_sd_n), case.drift, softening)
 
 
@@ -223,5 +238,7 @@ __all__ = [
     "outcome_label",
     "rig_noise",
     "score",
+    "snr_by_test",
     "strength_for_snr",
+    "true_parameters",
 ]
