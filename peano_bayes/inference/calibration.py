@@ -14,9 +14,8 @@ the load cell's noise scale; the rest at nominal values.
 
 from __future__ import annotations
 
-import dataclasses
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import stats
@@ -45,7 +44,7 @@ def simulate(params: dict, seed: int, exact_inputs: bool = False):
     model = {k: v for k, v in params.items() if k != NOISE_NAME}
     noise = RigNoise(force_sd_n=float(params[NOISE_NAME]))
     if exact_inputs:
-        noise = dataclasses.replace(noise, strain_sd=0.0, pressure_sd_pa=0.0)
+        noise = replace(noise, strain_sd=0.0, pressure_sd_pa=0.0)
     return simulate_dataset(
         SBC_MATERIAL,
         model,
