@@ -121,10 +121,11 @@ def main(argv=None) -> int:
     suffix = "" if args.snr == 2.0 and args.effects == list(HIDEABLE) else f"-snr{args.snr:g}"
     write_atomic_text(out / f"identifiability{suffix}.csv", table.to_csv(index=False, float_format="%.4g"))
     summary = table.groupby("effect")[["snr_nominal", "snr_left_base", "snr_left_effect", "snr_visible"]].max()
+    source = Path(args.strengths).resolve().relative_to(HERE.parent)
     lines = [
         "# How much of each hidden effect the base model absorbs",
         "",
-        f"Strengths of SNR {args.snr:g} from `{Path(args.strengths).relative_to(HERE.parent)}` where it has them, "
+        f"Strengths of SNR {args.snr:g} from `{source}` where it has them, "
         "else calibrated by `strength_for_snr` (the benchmark's bisection); data simulated with "
         f"the load-cell noise divided by {args.shrink:g}; SNR columns in units of the rig's per-sample noise at "
         f"{REFERENCE_FORCE_SD_N} N (max over tests). `snr_left_base`: RMS misfit of the refitted base model "

@@ -44,7 +44,7 @@ from peano_bayes.discovery.model import (
     to_unconstrained,
     to_values,
 )
-from peano_bayes.discovery.workflow import strength_wald
+from peano_bayes.discovery.workflow import Gates, identified, strength_wald
 from peano_bayes.inference.calibration import wilson_interval
 from peano_bayes.inference.likelihood import predict
 
@@ -311,3 +311,18 @@ def test_strength_wald_reduces_to_the_marginal_z_for_one_parameter_and_is_joint_
     fit = _fake_fit({names[0]: 1.0, names[1]: 1.0, names[2]: 0.0}, {n: 1.0 for n in names}, np.ones((3, 3)))
     w, _ = strength_wald(fit, names[:2], damping.off, 1.88)
     assert w == pytest.approx(1.0, rel=1e-9)
+
+
+def test_identification_gate_needs_a_strong_held_out_gain_only_on_a_correlation_ridge():
+    """Gate 6 with the logged evidence of real cases: a tuning run's spurious series compliance (correlation
+    0.98, gain 1.5 standard errors) fails; the bundled PC mount (0.98, 3.8 se) and any weakly correlated
+    candidate pass; an undefined standard error never counts as strong."""
+    gates = Gates()
+    assert not identified(0.982, 6.4, 6.4 / 1.5, gates)
+    assert identified(0.980, 428708.0, 428708.0 / 3.8, gates)
+    assert identified(0.90, 1.0, 10.0, gates)
+    assert not identified(0.99, 5.0, float("inf"), gates)
+    assert not identified(0.99, 5.0, 0.0, gates)
+    edge = gates.max_correlation + 1e-9
+    assert identified(edge, gates.ridge_elpd_z, 1.0, gates)
+    assert not identified(edge, 0.999 * gates.ridge_elpd_z, 1.0, gates)

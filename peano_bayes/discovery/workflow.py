@@ -18,10 +18,14 @@ significant and the flexible session baseline until it is in the model.
 4. it is real: the joint Laplace 94 % region of its strength parameters excludes their off values (a Wald
    test, :func:`strength_wald`; for one parameter, the value is more than ``strength_z`` sd from off);
 5. it generalizes: held-out RMSE (standardized) ``<= max_heldout_ratio`` times the value before.
-6. it is identified: no parameter of it has a Laplace correlation above ``max_correlation`` with a parameter
-   already in the model (the gain of such a candidate is a retuned base, not structure of its own: on
-   seeds 4000-4021 a series compliance correlated 0.98 with the tensile stiffness passed the other gates on
-   no-effect data, and the only series compliance "detections" were the same artefact).
+6. it is identified (:func:`identified`): no parameter of it has a Laplace correlation above
+   ``max_correlation`` with a parameter already in the model, unless its held-out gain is strong on its own,
+   ``delta elpd / se >= ridge_elpd_z``. Along such a ridge the Laplace approximation behind gate 4 is poor and a
+   small gain can be a retuned base: on seeds 3000-3021 and 4000-4021, 17 candidates passed every other gate at
+   correlations above 0.95 (16 series compliance at 0.98-0.99 with the tensile stiffness, one hysteresis at
+   0.96), 15 of them on data without that effect, every one with ``delta elpd / se`` of 1.1-2.2. Held-out elpd
+   does not rely on the Laplace approximation, so a large, well-measured gain still counts (bundled muscles:
+   PC's mount and TPC's and FC's hysteresis, ``z`` 3.8-5.2 at correlations 0.975-0.98).
 The evidence also records how much of the structure the diagnosis flagged the candidate removes (``flagged``,
 ``flagged_before``, ``flagged_after``: sums of ``T^2`` over the Holm-significant signatures); reported, not gated.
 
@@ -76,7 +80,13 @@ class Gates:
     on seeds 4000-4021: there nonlinear damping, with three correlated strength parameters none alone 1.88 sd
     from zero, failed only that gate in 8 of 22 runs while gaining about 130 in held-out elpd; the joint test
     named it in 7 of those 8. ``max_correlation`` became a gate after the same run (point 6). No threshold value
-    changed."""
+    changed.
+
+    ``ridge_elpd_z`` was added after the final run on seeds 5000-5021, from discovery on the bundled muscles (the
+    correlation gate alone rejected PC's and PCS's mounts and TPC's and FC's hysteresis, those with gains of
+    1.1-5.2 standard errors; 3.8-5.2 for PC's mount and the two hysteresis) and the tuning runs' correlated
+    false positives (1.1-2.2). No candidate of the 5000-5021 run failed the correlation gate alone, so every
+    decision of that run is the same under it (``experiments/discrepancy_rescore.py`` checks this)."""
 
     min_delta_elpd: float = 4.0
     min_elpd_z: float = 0.5
@@ -90,6 +100,14 @@ class Gates:
     screen: int = 4
     base_starts: int = 4
     max_correlation: float = 0.95
+    ridge_elpd_z: float = 3.0
+
+
+def identified(correlation: float, delta_elpd: float, elpd_se: float, gates: Gates = Gates()) -> bool:
+    """Gate 6: the candidate's largest Laplace correlation with a parameter already in the model is at most
+    ``gates.max_correlation``, or its held-out gain is at least ``gates.ridge_elpd_z`` standard errors."""
+    strong = elpd_se > 0 and np.isfinite(elpd_se) and delta_elpd / elpd_se >= gates.ridge_elpd_z
+    return bool(correlation <= gates.max_correlation or strong)
 
 
 def _blocks(cov_block: np.ndarray, values: np.ndarray) -> np.ndarray:
@@ -206,7 +224,7 @@ def _score(
         "own_signature": t_before < gates.min_signature or evidence["signature_ratio"] <= gates.max_signature_ratio,
         "strength_excludes_off": wald >= wald_threshold,
         "generalizes": heldout_ratio <= gates.max_heldout_ratio,
-        "identified": correlation <= gates.max_correlation,
+        "identified": identified(correlation, delta_elpd, se, gates),
         "solver_ok": evidence["solver_ok"],
     }
     checks = {k: bool(v) for k, v in checks.items()}
@@ -391,4 +409,4 @@ def discover(split: SplitData, *, base=DEFAULT_BASE, gates: Gates = Gates(), see
     return Discovery(report, split, first_fit, cur_fit)
 
 
-__all__ = ["Discovery", "Gates", "VERDICTS", "discover", "fit_base", "gap_table"]
+__all__ = ["Discovery", "Gates", "VERDICTS", "discover", "fit_base", "gap_table", "identified"]
