@@ -311,6 +311,10 @@ def test_strength_wald_reduces_to_the_marginal_z_for_one_parameter_and_is_joint_
     fit = _fake_fit({names[0]: 1.0, names[1]: 1.0, names[2]: 0.0}, {n: 1.0 for n in names}, np.ones((3, 3)))
     w, _ = strength_wald(fit, names[:2], damping.off, 1.88)
     assert w == pytest.approx(1.0, rel=1e-9)
+    # A strength parameter with no Laplace sd is not tested: neither in W nor in the degrees of freedom.
+    fit = _fake_fit({names[0]: 3.0, names[1]: 0.0, names[2]: 0.0}, {names[0]: 1.5, names[1]: 0.0, names[2]: 0.0},
+                    np.eye(3))  # fmt: skip
+    assert strength_wald(fit, names, damping.off, 1.88) == pytest.approx((4.0, 1.88**2), rel=1e-9)
 
 
 def test_identification_gate_needs_a_strong_held_out_gain_only_on_a_correlation_ridge():

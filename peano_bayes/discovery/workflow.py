@@ -155,9 +155,9 @@ class _Candidate:
 def strength_wald(fit: ModelFit, strength: tuple, off: dict, z: float) -> tuple[float, float]:
     """Joint test that the strength parameters of an effect are away from ``off``: the Wald statistic
     ``W = d' C^+ d`` of ``d = (value - off) / sd`` with ``C`` their Laplace correlation (pseudo-inverse: a
-    direction the data do not constrain adds nothing), and its threshold, the chi-square quantile with
-    ``len(strength)`` degrees of freedom at the level ``2 Phi(z) - 1`` of the two-sided ``z`` (for one
-    parameter, ``W >= z^2`` is ``|value - off| >= z sd``)."""
+    direction the data do not constrain adds nothing), and its threshold, the chi-square quantile at the level
+    ``2 Phi(z) - 1`` of the two-sided ``z`` with one degree of freedom per strength parameter tested (those
+    with a Laplace sd > 0; for one parameter, ``W >= z^2`` is ``|value - off| >= z sd``)."""
     free = fit.spec.free_names
     names = [p for p in strength if fit.sd.get(p, 0.0) > 0.0]
     if not names:
@@ -167,7 +167,7 @@ def strength_wald(fit: ModelFit, strength: tuple, off: dict, z: float) -> tuple[
     corr = fit.correlation[np.ix_(index, index)]
     wald = float(d @ np.linalg.pinv(corr, rcond=1e-8, hermitian=True) @ d)
     level = 2.0 * stats.norm.cdf(z) - 1.0
-    return wald, float(stats.chi2.ppf(level, len(strength)))
+    return wald, float(stats.chi2.ppf(level, len(names)))
 
 
 def _score(
