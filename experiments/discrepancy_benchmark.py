@@ -11,7 +11,10 @@ gates: it is kept in ``discrepancy/tuning/``. The final run on 3000-3021 (workfl
 ``discrepancy-4000/``) became tuning evidence for the joint strength test, the identification gate and per-run
 inputs (its misses: damping failing only the marginal strength test, series compliance passing on no-effect
 data at correlation 0.98 with the tensile stiffness, cyclic softening failing its own-signature gate; see
-``discrepancy_identifiability.py``), so the next final run uses 5000 on. None of these seeds is reused.
+``discrepancy_identifiability.py``), so the next final run used 5000 on: the run on 5000-5021 (workflow 7b1aa5f,
+``discrepancy-5000/``) is the current final run, and the default ``--first-seed`` reproduces it. Seeds
+4000-4021 were used again to tune the pressure-averaging candidate (``discrepancy-4000/tuning/``); a final run
+of any later workflow change starts at ``--first-seed 6000``. None of these seeds is reused for a final run.
 The label never reaches ``discover``.
 
 Resumable: every finished run is one line of ``OUT/runs-<worker>.jsonl``; a rerun skips what is there. Writes
