@@ -41,22 +41,16 @@ from peano_bayes.discovery.harness import (
     REFERENCE_FORCE_SD_N,
     Case,
     hidden_dataset,
-    rig_noise,
+    reference_sigma,
     snr_by_test,
     strength_for_snr,
     true_parameters,
 )
 from peano_bayes.discovery.model import DEFAULT_BASE, NAMES, model_spec
 from peano_bayes.discovery.workflow import fit_base
-from peano_bayes.inference.likelihood import OBSERVED
 from peano_bayes.inference.results import write_atomic_text
 
 HERE = Path(__file__).resolve().parent
-
-
-def _sigma(test: str) -> float:
-    noise = rig_noise(REFERENCE_FORCE_SD_N)
-    return noise.force_sd_n if OBSERVED[test][0] == "force_n" else noise.strain_sd
 
 
 def _left(fit, split) -> dict:
@@ -67,7 +61,7 @@ def _left(fit, split) -> dict:
     out = {}
     for test in np.unique(tests):
         e = error[(tests == test) & np.isfinite(error)]
-        out[str(test)] = float(np.sqrt(np.mean(e**2))) / _sigma(str(test))
+        out[str(test)] = float(np.sqrt(np.mean(e**2))) / reference_sigma(str(test))
     return out
 
 

@@ -145,6 +145,12 @@ def true_parameters(effects: tuple[str, ...], strengths: dict) -> dict:
     return params
 
 
+def reference_sigma(test: str) -> float:
+    """The rig's per-sample noise sd of ``test``'s observed signal at :data:`REFERENCE_FORCE_SD_N` [N or -]."""
+    noise = rig_noise(REFERENCE_FORCE_SD_N)
+    return noise.force_sd_n if OBSERVED[test][0] == "force_n" else noise.strain_sd
+
+
 def snr_by_test(effect: str, strength: float) -> dict[str, float]:
     """Per rig test: RMS(y_with - y_without) / sigma of ``effect`` at ``strength``, at equal base parameters,
     noise-free (sigma: the rig's per-sample noise at :data:`REFERENCE_FORCE_SD_N`)."""
@@ -152,14 +158,12 @@ def snr_by_test(effect: str, strength: float) -> dict[str, float]:
     without = _simulate(dict(TRUTH_PARAMS), (), 0, quiet, False, 0.0)
     params, quirks, softening = _truth((effect,), {effect: strength})
     with_ = _simulate(params, quirks, 0, quiet, False, softening)
-    noise = rig_noise(REFERENCE_FORCE_SD_N)
     out = {}
     for test in sorted({r.test for r in without.runs}):
         signal = OBSERVED[test][0]
-        sd = noise.force_sd_n if signal == "force_n" else noise.strain_sd
         a = np.concatenate([getattr(r, signal) for r in with_.runs if r.test == test])
         b = np.concatenate([getattr(r, signal) for r in without.runs if r.test == test])
-        out[test] = float(np.sqrt(np.mean((a - b) ** 2))) / sd
+        out[test] = float(np.sqrt(np.mean((a - b) ** 2))) / reference_sigma(test)
     return out
 
 
@@ -236,6 +240,7 @@ __all__ = [
     "TRUTH_CONFIG",
     "hidden_dataset",
     "outcome_label",
+    "reference_sigma",
     "rig_noise",
     "score",
     "snr_by_test",

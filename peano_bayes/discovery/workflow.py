@@ -152,18 +152,23 @@ class _Candidate:
     passed: bool
 
 
+def _standardized_distance(fit: ModelFit, names, off: dict) -> dict:
+    """``(value - off) / sd`` of each parameter in ``names`` that has a Laplace sd > 0."""
+    return {p: (fit.params[p] - off[p]) / fit.sd[p] for p in names if fit.sd.get(p, 0.0) > 0.0}
+
+
 def strength_wald(fit: ModelFit, strength: tuple, off: dict, z: float) -> tuple[float, float]:
     """Joint test that the strength parameters of an effect are away from ``off``: the Wald statistic
     ``W = d' C^+ d`` of ``d = (value - off) / sd`` with ``C`` their Laplace correlation (pseudo-inverse: a
     direction the data do not constrain adds nothing), and its threshold, the chi-square quantile at the level
     ``2 Phi(z) - 1`` of the two-sided ``z`` with one degree of freedom per strength parameter tested (those
     with a Laplace sd > 0; for one parameter, ``W >= z^2`` is ``|value - off| >= z sd``)."""
-    free = fit.spec.free_names
-    names = [p for p in strength if fit.sd.get(p, 0.0) > 0.0]
+    distance = _standardized_distance(fit, strength, off)
+    names = list(distance)
     if not names:
         return 0.0, float("inf")
-    d = np.array([(fit.params[p] - off[p]) / fit.sd[p] for p in names])
-    index = [free.index(p) for p in names]
+    d = np.array([distance[p] for p in names])
+    index = [fit.spec.free_names.index(p) for p in names]
     corr = fit.correlation[np.ix_(index, index)]
     wald = float(d @ np.linalg.pinv(corr, rcond=1e-8, hermitian=True) @ d)
     level = 2.0 * stats.norm.cdf(z) - 1.0
@@ -191,7 +196,8 @@ def _score(
     flagged_before = float(sum(diag.statistic[k] ** 2 for k in flagged))
     flagged_after = float(sum(signature_statistic(fit_eval.r, weights[k], k in SQUARED) ** 2 for k in flagged))
     off = effect.off
-    z_strength = {p: abs(fit.params[p] - off[p]) / fit.sd[p] if fit.sd.get(p, 0) > 0 else 0.0 for p in effect.strength}
+    distance = _standardized_distance(fit, effect.strength, off)
+    z_strength = {p: abs(distance.get(p, 0.0)) for p in effect.strength}
     wald, wald_threshold = strength_wald(fit, effect.strength, off, gates.strength_z)
     heldout_ratio = _rmse(held_eval.r) / _rmse(before_held.r)
     free = fit.spec.free_names
@@ -215,7 +221,6 @@ def _score(
         "flagged_before": flagged_before,
         "flagged_after": flagged_after,
         "max_correlation_with_base": correlation,
-        "weakly_identified": bool(correlation > gates.max_correlation),
         "solver_ok": fit_eval.solver_ok and held_eval.solver_ok,
     }
     checks = {
@@ -251,10 +256,9 @@ def fit_base(base, fit_data, *, starts: int = Gates.base_starts, seed: int = 0) 
     for _ in range(starts - 1):
         x0.append(spec.pinned * np.where(spec.mask, np.exp(rng.normal(0.0, 0.3, spec.mask.size)), 1.0))
     x0 = [np.where(spec.mask, s, spec.pinned) for s in x0]
-    for i, name in enumerate(NAMES):
-        if name == "length_fraction":
-            for s in x0:
-                s[i] = min(s[i], 0.95)
+    i = NAMES.index("length_fraction")
+    for s in x0:
+        s[i] = min(s[i], 0.95)
     fits = [f for f in fit_models([spec] * len(x0), x0, fit_data) if f is not None]
     if not fits:
         raise RuntimeError(f"every fit of the base model {base} failed (non-finite or the physics solver missed)")
