@@ -202,8 +202,9 @@ def discovery_data(
         elapsed += float(run.time_s[-1] - run.time_s[0])
     noise = _sensor_noise(runs, specimen)
     observations = prepare(one, bin_sizes, share_repeats=False)
+    groups = observations.groups
     parts: dict[bool, tuple[list, list]] = {False: ([], []), True: ([], [])}
-    for group in observations.groups:
+    for group in groups:
         info = np.array([cycles[key] for key in group.keys])
         held = (info[:, 0] == 1) & (info[:, 1] >= 2)
         for flag in (False, True):
