@@ -9,6 +9,7 @@ protocol (the step response's compilation would add minutes; the benchmark cover
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import jax
 import numpy as np
@@ -17,6 +18,7 @@ import pytest
 from peano_bayes.cli import main
 from peano_bayes.data import save
 from peano_bayes.discovery import LIBRARY, discover, discovery_data
+from peano_bayes.discovery.data import DISCOVERY_BIN_SIZES
 from peano_bayes.discovery.diagnose import diagnose, signature_statistic
 from peano_bayes.discovery.effects import (
     BASELINE_PARAMETERS,
@@ -46,7 +48,7 @@ from peano_bayes.discovery.model import (
 )
 from peano_bayes.discovery.workflow import Gates, identified, strength_wald
 from peano_bayes.inference.calibration import wilson_interval
-from peano_bayes.inference.likelihood import predict
+from peano_bayes.inference.likelihood import predict, prepare
 
 # One xdist worker runs this group, so one compilation of the superset model serves every test here.
 pytestmark = pytest.mark.xdist_group("discovery")
@@ -121,6 +123,44 @@ def test_session_baseline_adds_legendre_polynomials_of_session_time_to_the_force
     np.testing.assert_allclose(shift[force], expected[force], atol=1e-9)
     np.testing.assert_allclose(shift[~force], 0.0, atol=1e-12)
     assert set(BASELINE_PARAMETERS) == set(c) and all(LIBRARY["session_baseline"].off[p] == 0.0 for p in c)
+
+
+def test_discovery_inputs_share_pressure_within_a_condition_and_keep_each_runs_strain():
+    """Pressure inputs (muscle, and supply in steps) are the mean over the runs of a condition (test and, for load
+    cycles, pressure level); strain stays each run's own; fit and held-out runs of a condition get one mean."""
+    dataset = hidden_dataset(Case(("cyclic_softening",), 4.0), seed=104)
+    split = discovery_data(dataset)
+    specimen = split.specimen
+    own = replace(dataset, runs=tuple(r for r in dataset.runs if r.specimen == specimen))
+    per_run = {}
+    for group in prepare(own, DISCOVERY_BIN_SIZES, share_repeats=False).groups:
+        for row, key in enumerate(group.keys):
+            supply = None if group.supply_pa is None else group.supply_pa[row]
+            per_run[key] = (group.strain[row], group.pressure_pa[row], supply)
+
+    def condition(run):
+        level = round(float(np.median(run.pressure_pa)) / 10e3) if run.test == "load_cycle" else 0
+        return run.test, level
+
+    members: dict = {}
+    for run in own.runs:
+        members.setdefault(condition(run), []).append(run.key)
+    runs = {run.key: run for run in own.runs}
+    seen = set()
+    for group in split.both.groups:
+        for row, key in enumerate(group.keys):
+            peers = members[condition(runs[key])]
+            assert len(peers) >= 2
+            np.testing.assert_allclose(group.strain[row], per_run[key][0], rtol=0, atol=0)
+            mean = np.mean([per_run[k][1] for k in peers], axis=0)
+            np.testing.assert_allclose(group.pressure_pa[row], mean, rtol=1e-12, atol=1e-9)
+            assert not np.allclose(per_run[key][1], mean, rtol=0, atol=1e-3)  # the runs' own pressures differ
+            if group.test == "step":
+                supply = np.mean([per_run[k][2] for k in peers], axis=0)
+                np.testing.assert_allclose(group.supply_pa[row], supply, rtol=1e-12, atol=1e-9)
+            seen.add(key)
+    assert seen == set(split.fit_runs) | set(split.held_out_runs) == set(runs)
+    assert {"load_cycle", "blocking", "stroke", "step"} <= {g.test for g in split.both.groups}
 
 
 @pytest.fixture(scope="module")

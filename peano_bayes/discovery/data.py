@@ -10,11 +10,16 @@ protocols, so the held-out error measures model error plus noise, not extrapolat
 likelihood of every candidate model is measured against the same, model-free noise scale; a bin mean of ``k``
 samples has sd ``sd / sqrt(k)``.
 
-**Inputs:** every run is simulated from its own denoised driving inputs. Repeats of a condition run one
-commanded protocol, but the rig's realized strain and pressure follow the specimen: when the specimen changes
-between repeats (cyclic softening), so do they, and a mean over the repeats put an input error that follows the
-cycle index into every run (on seeds 4000-4021 the fitted softening then left its own first-cycle signature at
-about half its size and failed that gate in 9 of 22 runs; with each run's own inputs, 7 of those 9 were named).
+**Inputs:** every run is simulated from its own denoised strain, and from the pressure inputs (muscle and, in
+steps, supply pressure) averaged over the runs of its condition. The rig's realized strain follows the specimen:
+when the specimen changes between repeats (cyclic softening), so does the strain, and a strain averaged over the
+repeats put an input error that follows the cycle index into every run (on seeds 4000-4021 the fitted softening
+then left its own first-cycle signature at about half its size and failed that gate in 9 of 22 runs; with each
+run's own inputs, 7 of those 9 were named). The pressure follows the regulator's one command per condition, and
+its sensor's denoising error is independent from run to run, so the mean is the better input: with each run's
+own pressure the onset of a threshold pressure was blurred by that error (threshold pressure named in 10 of 22
+runs on seeds 4000-4021, 13 of 22 with shared pressure; ``experiments/discrepancy-4000/tuning/pressure_average``).
+Held-out runs share the average too; it uses their pressure inputs, never their observed force or strain.
 """
 
 from __future__ import annotations
@@ -85,8 +90,8 @@ class SplitData:
         return int(sum(g.observed.size for g in self.fit.groups))
 
 
-def _cycle_indices(dataset: Dataset, specimen: str) -> dict:
-    """(specimen, test, run) -> cycle index within its condition, and the size of each condition."""
+def _conditions(dataset: Dataset, specimen: str) -> dict:
+    """(specimen, test, run) -> (condition, cycle index within it, size of the condition)."""
     conditions: dict[tuple, list] = {}
     for run in dataset.runs:
         if run.specimen != specimen:
@@ -94,10 +99,27 @@ def _cycle_indices(dataset: Dataset, specimen: str) -> dict:
         level = round(float(np.nanmedian(run.pressure_pa)) / _PRESSURE_CLASS_PA) if run.test == "load_cycle" else 0
         conditions.setdefault((run.test, level), []).append(run)
     out = {}
-    for runs in conditions.values():
+    for condition, runs in conditions.items():
         for index, run in enumerate(sorted(runs, key=lambda r: r.run)):
-            out[run.key] = (index, len(runs))
+            out[run.key] = (condition, index, len(runs))
     return out
+
+
+def _share_pressure(group: RunGroup, condition: list) -> RunGroup:
+    """Each run's pressure inputs replaced by their mean over the runs of its condition in ``group``.
+
+    The regulator commands one pressure per condition and the sensor's denoising error is independent from run
+    to run, so the mean is the better estimate; strain stays per run (it follows the specimen)."""
+    index: dict = {}
+    labels = np.array([index.setdefault(c, len(index)) for c in condition])
+
+    def mean(a):
+        if a is None:
+            return None
+        a = np.asarray(a, dtype=float)
+        return np.stack([a[labels == label].mean(axis=0) for label in labels])
+
+    return replace(group, pressure_pa=mean(group.pressure_pa), supply_pa=mean(group.supply_pa))
 
 
 def _take(group: RunGroup, rows: np.ndarray, cycle: np.ndarray) -> RunGroup:
@@ -190,7 +212,8 @@ def discovery_data(
         )
     runs = [run for run in dataset.runs if run.specimen == specimen and run.test in tests]
     one = replace(dataset, runs=tuple(runs))
-    cycles = _cycle_indices(one, specimen)
+    conditions = _conditions(one, specimen)
+    cycles = {key: (index, size) for key, (_, index, size) in conditions.items()}
     if not any(size >= 2 for _, size in cycles.values()):
         raise PeanoBayesInputError(
             f"specimen {specimen!r} has no test condition with two or more runs; discovery holds out a repeat "
@@ -202,7 +225,7 @@ def discovery_data(
         elapsed += float(run.time_s[-1] - run.time_s[0])
     noise = _sensor_noise(runs, specimen)
     observations = prepare(one, bin_sizes, share_repeats=False)
-    groups = observations.groups
+    groups = [_share_pressure(g, [conditions[key][0] for key in g.keys]) for g in observations.groups]
     parts: dict[bool, tuple[list, list]] = {False: ([], []), True: ([], [])}
     for group in groups:
         info = np.array([cycles[key] for key in group.keys])
