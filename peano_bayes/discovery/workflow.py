@@ -86,7 +86,9 @@ class Gates:
     correlation gate alone rejected PC's and PCS's mounts and TPC's and FC's hysteresis, those with gains of
     1.1-5.2 standard errors; 3.8-5.2 for PC's mount and the two hysteresis) and the tuning runs' correlated
     false positives (1.1-2.2). No candidate of the 5000-5021 run failed the correlation gate alone, so every
-    decision of that run is the same under it (``experiments/discrepancy_rescore.py`` checks this)."""
+    decision of that run is the same under it (``experiments/discrepancy_rescore.py`` checks this). The final
+    run on seeds 6000-6021 (pressure inputs averaged over repeats, ``discovery/data.py``) ran with every value
+    here as it stands."""
 
     min_delta_elpd: float = 4.0
     min_elpd_z: float = 0.5
