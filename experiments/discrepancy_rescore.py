@@ -46,9 +46,8 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     result = {}
     for out in args.dirs:
-        result[str(out)] = rescore(out)
-        print(f"{out}: {result[str(out)]['runs']} runs, {result[str(out)]['candidates']} candidates, "
-              f"{result[str(out)]['flips']} change", flush=True)  # fmt: skip
+        r = result[str(out)] = rescore(out)
+        print(f"{out}: {r['runs']} runs, {r['candidates']} candidates, {r['flips']} change", flush=True)
     print(json.dumps(result))
     return 0
 

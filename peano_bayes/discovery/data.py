@@ -105,19 +105,20 @@ def _conditions(dataset: Dataset, specimen: str) -> dict:
     return out
 
 
-def _share_pressure(group: RunGroup, condition: list) -> RunGroup:
-    """Each run's pressure inputs replaced by their mean over the runs of its condition in ``group``.
+def _share_pressure(group: RunGroup, conditions: list) -> RunGroup:
+    """Each run's pressure inputs replaced by their mean over the runs of its condition in ``group``
+    (``conditions`` (r,): the condition of each row).
 
     The regulator commands one pressure per condition and the sensor's denoising error is independent from run
     to run, so the mean is the better estimate; strain stays per run (it follows the specimen)."""
     index: dict = {}
-    labels = np.array([index.setdefault(c, len(index)) for c in condition])
+    labels = np.array([index.setdefault(c, len(index)) for c in conditions])
 
     def mean(a):
         if a is None:
             return None
         a = np.asarray(a, dtype=float)
-        return np.stack([a[labels == label].mean(axis=0) for label in labels])
+        return np.stack([a[labels == label].mean(axis=0) for label in range(len(index))])[labels]
 
     return replace(group, pressure_pa=mean(group.pressure_pa), supply_pa=mean(group.supply_pa))
 
