@@ -15,7 +15,9 @@ data at correlation 0.98 with the tensile stiffness, cyclic softening failing it
 ``discrepancy-5000/``). Seeds 4000-4021 were used again to tune the pressure-averaging candidate
 (``discrepancy-4000/tuning/pressure_average/``), whose adoption was decided before its final run on 6000-6021
 (68112ca plus that patch, ``discrepancy-6000/``): that is the current final run, and the defaults reproduce it.
-A final run of any later workflow change starts at ``--first-seed 7000``. None of these seeds is reused for a final run.
+Seeds 7000-7021 extend the 6000 run for five cases with the same workflow (``--cases none drift
+threshold_pressure``, ``discrepancy-7000/PREREGISTRATION.md``). A final run of any later workflow change starts at
+``--first-seed 8000``. None of these seeds is reused for a final run.
 The label never reaches ``discover``.
 
 Resumable: every finished run is one line of ``OUT/runs-<worker>.jsonl``; a rerun skips what is there. Writes
@@ -48,11 +50,15 @@ HERE = Path(__file__).resolve().parent
 TWO_EFFECTS = ("hysteresis", "flow_restriction")
 
 
-def cases(snrs, noise_levels) -> list[Case]:
+CASE_LABELS = (*HIDEABLE, "none", "drift", "+".join(TWO_EFFECTS))
+
+
+def cases(snrs, noise_levels, only=None) -> list[Case]:
+    """Every case, or those whose label is in ``only`` (``none`` covers every noise level)."""
     out = [Case((e,), snr) for snr in snrs for e in HIDEABLE]
     out += [Case(force_sd_n=sd) for sd in noise_levels]
     out += [Case(drift=True), Case(TWO_EFFECTS, max(snrs))]
-    return out
+    return [c for c in out if only is None or c.label in only]
 
 
 def key(case: Case, seed: int) -> str:
@@ -110,13 +116,13 @@ def _read_rows(out: Path) -> dict:
     return done
 
 
-def _todo(out: Path, snrs, noise_levels, seeds: int, first_seed: int) -> list[tuple[Case, int]]:
+def _todo(out: Path, snrs, noise_levels, seeds: int, first_seed: int, only=None) -> list[tuple[Case, int]]:
     done = _read_rows(out)
     # Seed-major: a run stopped early has every case at (almost) the same number of seeds.
     return [
         (case, s)
         for s in range(first_seed, first_seed + seeds)
-        for case in cases(snrs, noise_levels)
+        for case in cases(snrs, noise_levels, only)
         if key(case, s) not in done
     ]
 
@@ -131,11 +137,11 @@ def _claim(out: Path, run_key: str) -> bool:
     return True
 
 
-def work(out: Path, snrs, noise_levels, seeds: int, first_seed: int, index: int, count: int) -> None:
+def work(out: Path, snrs, noise_levels, seeds: int, first_seed: int, index: int, count: int, only=None) -> None:
     """Worker ``index`` of ``count``: claim each run not done yet (see :func:`_claim`), run it and append it to
     ``OUT/runs-<index>.jsonl`` as it finishes."""
     strengths = json.loads((out / "strengths.json").read_text())
-    todo = _todo(out, snrs, noise_levels, seeds, first_seed)
+    todo = _todo(out, snrs, noise_levels, seeds, first_seed, only)
     with open(out / f"runs-{index}.jsonl", "a") as fh:
         for i, (case, seed) in enumerate(todo, 1):
             if not _claim(out, key(case, seed)):
@@ -159,18 +165,19 @@ def work(out: Path, snrs, noise_levels, seeds: int, first_seed: int, index: int,
             )
 
 
-def run(out: Path, snrs, noise_levels, seeds: int, first_seed: int, jobs: int) -> list[dict]:
+def run(out: Path, snrs, noise_levels, seeds: int, first_seed: int, jobs: int, only=None) -> list[dict]:
     """Calibrate the strengths, then run the to-do list in ``jobs`` worker processes (one compilation each; the
     second starts after the first has filled the on-disk compilation cache)."""
     out.mkdir(parents=True, exist_ok=True)
-    _calibrate(out, cases(snrs, noise_levels))
-    todo = _todo(out, snrs, noise_levels, seeds, first_seed)
+    _calibrate(out, cases(snrs, noise_levels, only))
+    todo = _todo(out, snrs, noise_levels, seeds, first_seed, only)
     print(f"{len(_read_rows(out))} runs done, {len(todo)} to go", flush=True)
     # Claims of a stopped run are stale: its unfinished runs are in the to-do list again.
     shutil.rmtree(out / "claims", ignore_errors=True)
     (out / "claims").mkdir()
     common = [sys.executable, __file__, "--out", str(out), "--seeds", str(seeds), "--first-seed", str(first_seed),
-              "--snr", *map(str, snrs), "--noise", *map(str, noise_levels)]  # fmt: skip
+              "--snr", *map(str, snrs), "--noise", *map(str, noise_levels),
+              *(["--cases", *only] if only else [])]  # fmt: skip
     procs = []
     for index in range(min(jobs, max(len(todo), 1))):
         procs.append(subprocess.Popen(common + ["--worker", str(index), str(jobs)]))
@@ -193,7 +200,7 @@ def markdown(df: pd.DataFrame, index: bool = True) -> str:
     return "\n".join(lines)
 
 
-def analyse(rows: list[dict], out: Path) -> dict:
+def analyse(rows: list[dict], out: Path, pooled_from=()) -> dict:
     df = pd.DataFrame(rows)
     df["row"] = np.where(df["drift"], "drift", df["label"]) + np.where(
         df["snr"] > 0, " @SNR " + df["snr"].map("{:g}".format), ""
@@ -240,9 +247,15 @@ def analyse(rows: list[dict], out: Path) -> dict:
     md = [
         "# Discovery on hidden effects",
         "",
-        f"{len(df)} runs, seeds {int(df['seed'].min())}-{int(df['seed'].max())} (never used before: see the seed "
-        "history in experiments/discrepancy_benchmark.py). "
-        "Effects that cannot be hidden "
+        (
+            f"{len(df)} runs, seeds {int(df['seed'].min())}-{int(df['seed'].max())}, pooled from "
+            + ", ".join(f"`{d}`" for d in pooled_from)
+            + " (each a final run on seeds never used before it: see their BENCHMARK.md). "
+            if pooled_from
+            else f"{len(df)} runs, seeds {int(df['seed'].min())}-{int(df['seed'].max())} (never used before: see the "
+            "seed history in experiments/discrepancy_benchmark.py). "
+        )
+        + "Effects that cannot be hidden "
         f"(part of every base model): {', '.join(NOT_HIDEABLE)}.",
         "",
         "## Recall per effect (Wilson 95 % interval)",
@@ -253,11 +266,20 @@ def analyse(rows: list[dict], out: Path) -> dict:
         "",
         markdown(fp, index=False),
         "",
-        f"## Out of library (load-cell drift): unexplained or none in {drift_ok} of {len(drift)}",
-        "",
-        f"## Two effects ({' + '.join(TWO_EFFECTS)}): both and only both named in "
-        f"{int(two['correct'].sum())} of {len(two)}",
-        "",
+        *(
+            [f"## Out of library (load-cell drift): unexplained or none in {drift_ok} of {len(drift)}", ""]
+            if len(drift)
+            else []
+        ),
+        *(
+            [
+                f"## Two effects ({' + '.join(TWO_EFFECTS)}): both and only both named in "
+                f"{int(two['correct'].sum())} of {len(two)}",
+                "",
+            ]
+            if len(two)
+            else []
+        ),
         "## Held-out gap on correct detections (RMSE after / before, worst test)",
         "",
         markdown(gap),
@@ -279,19 +301,38 @@ def main(argv=None) -> int:
     parser.add_argument("--seeds", type=int, default=22, help="seeds per case")
     parser.add_argument("--first-seed", type=int, default=6000)
     parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument(
+        "--cases",
+        nargs="+",
+        choices=CASE_LABELS,
+        metavar="LABEL",
+        help="only these cases (default: all); 'none' is every noise level",
+    )
     parser.add_argument("--analyse-only", action="store_true", help="only rebuild the tables from runs*.jsonl")
+    parser.add_argument(
+        "--pool",
+        nargs="+",
+        default=[],
+        metavar="DIR",
+        help="with --analyse-only: also read the runs of these directories (the --cases among them)",
+    )
     parser.add_argument("--worker", type=int, nargs=2, metavar=("INDEX", "COUNT"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     enable_compilation_cache()
     out = Path(args.out)
     if args.worker:
-        work(out, args.snr, args.noise, args.seeds, args.first_seed, *args.worker)
+        work(out, args.snr, args.noise, args.seeds, args.first_seed, *args.worker, only=args.cases)
         return 0
+    if args.pool and not args.analyse_only:
+        parser.error("--pool needs --analyse-only")
     if args.analyse_only:
-        rows = list(_read_rows(out).values())
+        sources = [d for d in [out, *map(Path, args.pool)] if _read_rows(d)]
+        rows = [r for d in sources for r in _read_rows(d).values() if args.cases is None or r["label"] in args.cases]
     else:
-        rows = run(out, args.snr, args.noise, args.seeds, args.first_seed, args.jobs)
-    figures = analyse(rows, out)
+        rows = run(out, args.snr, args.noise, args.seeds, args.first_seed, args.jobs, args.cases)
+    out.mkdir(parents=True, exist_ok=True)
+    pooled_from = [str(d.resolve().relative_to(HERE.parent)) for d in sources] if args.pool else []
+    figures = analyse(rows, out, pooled_from)
     print((out / "BENCHMARK.md").read_text())
     print(json.dumps(figures, default=float))
     return 0
