@@ -16,11 +16,17 @@ runs, in units of the rig's per-sample noise at 0.2 N (the SNR's sigma):
   remove (input denoising, binning), much the same whatever the effect;
 - ``snr_visible = sqrt(max(snr_left_base^2 - snr_left_effect^2, 0))``: the effect's own part of the misfit.
 
+``--coupon F1 F2 ...`` asks whether a tensile stiffness known from a coupon test would expose an effect the
+base absorbs (series compliance): it adds, per factor F, ``snr_left_coupon_F``, what the base leaves with its
+tensile parameters pinned at F times the truth (F = 1 a perfect coupon test, 0.9 / 1.1 one 10 % off) and the
+bending parameters refitted from the free base fit.
+
 Writes ``OUT/identifiability.csv`` and ``OUT/IDENTIFIABILITY.md`` (``-snr<SNR>`` added to both names for
 another SNR or a subset of effects); last line one JSON object.
 
     python experiments/discrepancy_identifiability.py
     python experiments/discrepancy_identifiability.py --snr 8 --effects series_compliance threshold_pressure
+    python experiments/discrepancy_identifiability.py --effects series_compliance --coupon 1 0.99 0.97 0.9
 """
 
 from __future__ import annotations
@@ -46,11 +52,12 @@ from peano_bayes.discovery.harness import (
     strength_for_snr,
     true_parameters,
 )
-from peano_bayes.discovery.model import DEFAULT_BASE, NAMES, model_spec
+from peano_bayes.discovery.model import DEFAULT_BASE, NAMES, ModelSpec, model_spec
 from peano_bayes.discovery.workflow import fit_base
 from peano_bayes.inference.results import write_atomic_text
 
 HERE = Path(__file__).resolve().parent
+TENSILE = ("tensile_ka_n_per_m", "tensile_kb_n_per_m2")
 
 
 def _left(fit, split) -> dict:
@@ -65,6 +72,17 @@ def _left(fit, split) -> dict:
     return out
 
 
+def _coupon_fit(free_base, truth: dict, factor: float, split):
+    """The base refitted with its tensile parameters pinned at ``factor`` x the truth (a coupon test)."""
+    mask, pinned = free_base.spec.mask.copy(), free_base.spec.pinned.copy()
+    for name in TENSILE:
+        i = NAMES.index(name)
+        mask[i], pinned[i] = False, truth[name] * factor
+    spec = ModelSpec(free_base.spec.active, mask, pinned)
+    (fit,) = fit_models([spec], [np.where(mask, free_base.x, pinned)], split.fit)
+    return fit
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--strengths", default=str(HERE / "discrepancy-5000" / "strengths.json"))
@@ -72,6 +90,14 @@ def main(argv=None) -> int:
     parser.add_argument("--shrink", type=float, default=100.0, help="noise divisor of the simulated data")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--effects", nargs="+", default=list(HIDEABLE), choices=HIDEABLE, metavar="EFFECT")
+    parser.add_argument(
+        "--coupon",
+        type=float,
+        nargs="*",
+        default=[],
+        metavar="FACTOR",
+        help="also fit the base with its tensile stiffness pinned at FACTOR x the truth",
+    )
     parser.add_argument("--out", default=str(HERE / "discrepancy-5000"))
     args = parser.parse_args(argv)
     enable_compilation_cache()
@@ -92,6 +118,10 @@ def main(argv=None) -> int:
         (effect_fit,) = fit_models([true_spec], [x0], split.fit)
         left_effect = _left(effect_fit, split) if effect_fit is not None else {}
         left_base = _left(best_base, split)
+        left_coupon = {}
+        for factor in args.coupon:
+            fit = _coupon_fit(best_base, truth, factor, split)
+            left_coupon[factor] = _left(fit, split) if fit is not None else {}
         nominal = snr_by_test(effect, strength)
         for test in left_base:
             rows.append(
@@ -101,6 +131,7 @@ def main(argv=None) -> int:
                     "snr_nominal": nominal[test],
                     "snr_left_base": left_base[test],
                     "snr_left_effect": left_effect.get(test, float("nan")),
+                    **{f"snr_left_coupon_{f:g}": c.get(test, float("nan")) for f, c in left_coupon.items()},
                 }
             )
         print(
@@ -113,8 +144,11 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     table["snr_visible"] = np.sqrt(np.maximum(table.snr_left_base**2 - table.snr_left_effect**2, 0.0))
     suffix = "" if args.snr == 2.0 and args.effects == list(HIDEABLE) else f"-snr{args.snr:g}"
+    suffix += "-coupon" if args.coupon else ""
+    columns = ["snr_nominal", "snr_left_base", "snr_left_effect", "snr_visible"]
+    columns += [c for c in table.columns if c.startswith("snr_left_coupon_")]
     write_atomic_text(out / f"identifiability{suffix}.csv", table.to_csv(index=False, float_format="%.4g"))
-    summary = table.groupby("effect")[["snr_nominal", "snr_left_base", "snr_left_effect", "snr_visible"]].max()
+    summary = table.groupby("effect")[columns].max()
     source = Path(args.strengths).resolve().relative_to(HERE.parent)
     lines = [
         "# How much of each hidden effect the base model absorbs",
@@ -126,16 +160,19 @@ def main(argv=None) -> int:
         "(tensile + bending stiffness), fitted and held-out runs; `snr_left_effect`: of base + the hidden effect "
         "(started at the truth): the model-error floor; `snr_visible`: sqrt(left_base^2 - left_effect^2) per "
         "test, the part of the misfit that is the effect's own. Made by "
-        "`experiments/discrepancy_identifiability.py`.",
+        "`experiments/discrepancy_identifiability.py`."
+        + (
+            " `snr_left_coupon_F`: what the base leaves with its tensile parameters pinned at F times the truth "
+            "(a coupon test F - 1 off), bending refitted."
+            if args.coupon
+            else ""
+        ),
         "",
-        "| effect | snr_nominal | snr_left_base | snr_left_effect | snr_visible |",
-        "|---|---|---|---|---|",
+        "| effect | " + " | ".join(columns) + " |",
+        "|---|" + "---|" * len(columns),
     ]
     for effect, r in summary.iterrows():
-        lines.append(
-            f"| {effect} | {r.snr_nominal:.2f} | {r.snr_left_base:.2f} | {r.snr_left_effect:.2f} | "
-            f"{r.snr_visible:.2f} |"
-        )
+        lines.append(f"| {effect} | " + " | ".join(f"{r[c]:.2f}" for c in columns) + " |")
     write_atomic_text(out / f"IDENTIFIABILITY{suffix}.md", "\n".join(lines) + "\n")
     print(json.dumps({e: round(float(v), 4) for e, v in summary["snr_visible"].items()}))
     return 0
