@@ -279,6 +279,20 @@ def test_hidden_effect_validation_small():
     assert wilson_interval(drift_ok, 3)[1] >= 0.8, outcomes
 
 
+def test_harness_pressure_noise_follows_the_case():
+    """A case's pressure_sd_pa reaches the rig's pressure sensors: the noise measured on a 200 kPa load cycle's
+    muscle pressure is the rig's 0.5 kPa by default and the case's value when a probe shrinks it."""
+    from peano_bayes.inference.denoise import noise_sd
+
+    def measured(case):
+        runs = [r for r in hidden_dataset(case, seed=105).runs if r.test == "load_cycle"]
+        run = max(runs, key=lambda r: float(np.nanmedian(r.pressure_pa)))
+        return noise_sd(run.pressure_pa)
+
+    assert measured(Case()) == pytest.approx(500.0, rel=0.2)
+    assert measured(Case(pressure_sd_pa=5.0)) == pytest.approx(5.0, rel=0.2)
+
+
 def test_the_harness_hides_each_effect_in_that_effects_own_parameters_away_from_off():
     """What the identifiability probe fits as the truth: the rig's parameters, with only the hidden effect's
     parameters changed, and its strength parameters not at the library's off value."""

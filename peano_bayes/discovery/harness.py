@@ -82,12 +82,14 @@ NOT_HIDEABLE = tuple(e for e in PHYSICS_EFFECTS if e not in REFERENCE)
 @dataclass(frozen=True)
 class Case:
     """What the rig hides. ``effects`` names (empty: none); ``snr`` of each; ``drift`` load-cell drift (out of
-    library); ``force_sd_n`` the load cell's noise [N]."""
+    library); ``force_sd_n`` the load cell's noise [N] (strain noise scales with it); ``pressure_sd_pa`` the
+    pressure sensors' noise [Pa] (default the rig's, :class:`~peano_bayes.rig.RigNoise`; probes shrink it)."""
 
     effects: tuple[str, ...] = ()
     snr: float = 0.0
     drift: bool = False
     force_sd_n: float = REFERENCE_FORCE_SD_N
+    pressure_sd_pa: float = RigNoise.pressure_sd_pa
 
     @property
     def label(self) -> str:
@@ -96,9 +98,14 @@ class Case:
         return "+".join(self.effects) if self.effects else "none"
 
 
-def rig_noise(force_sd_n: float) -> RigNoise:
+def rig_noise(force_sd_n: float, pressure_sd_pa: float = RigNoise.pressure_sd_pa) -> RigNoise:
     scale = force_sd_n / REFERENCE_FORCE_SD_N
-    return RigNoise(force_sd_n=force_sd_n, strain_sd=2e-4 * scale, force_drift_n_per_s=DRIFT_N_PER_S)
+    return RigNoise(
+        force_sd_n=force_sd_n,
+        strain_sd=2e-4 * scale,
+        pressure_sd_pa=pressure_sd_pa,
+        force_drift_n_per_s=DRIFT_N_PER_S,
+    )
 
 
 def _simulate(params: dict, quirks: tuple, seed: int, noise: RigNoise, drift: bool, softening: float) -> Dataset:
@@ -189,7 +196,7 @@ def hidden_dataset(case: Case, seed: int, strengths: dict | None = None) -> Data
     """The rig dataset of ``case`` (strengths by effect, default calibrated by :func:`strength_for_snr`)."""
     strengths = strengths or {e: strength_for_snr(e, case.snr) for e in case.effects}
     params, quirks, softening = _truth(case.effects, strengths)
-    return _simulate(params, quirks, seed, rig_noise(case.force_sd_n), case.drift, softening)
+    return _simulate(params, quirks, seed, rig_noise(case.force_sd_n, case.pressure_sd_pa), case.drift, softening)
 
 
 def outcome_label(report: dict) -> str:
