@@ -38,9 +38,8 @@ from peano_bayes.discovery.harness import (
     Case,
     hidden_dataset,
     reference_sigma,
-    true_parameters,
+    true_model,
 )
-from peano_bayes.discovery.model import DEFAULT_BASE, NAMES, model_spec
 from peano_bayes.inference.results import write_atomic_text
 from peano_bayes.rig import RigNoise
 
@@ -53,12 +52,8 @@ def floor_rows(
 ) -> list[dict]:
     case = Case((effect,), 2.0, force_sd_n=REFERENCE_FORCE_SD_N / shrink, pressure_sd_pa=pressure_sd_pa)
     split = discovery_data(hidden_dataset(case, seed, {effect: strength}), bin_sizes=bin_sizes)
-    truth = {n: v for n, v in true_parameters((effect,), {effect: strength}).items() if n in NAMES}
-    spec = model_spec((*DEFAULT_BASE, effect), truth)
-    x0 = spec.pinned.copy()
-    for n, v in truth.items():
-        x0[NAMES.index(n)] = v
-    (fit,) = fit_models([spec], [x0], split.fit)
+    spec, start = true_model(effect, strength)
+    (fit,) = fit_models([spec], [start], split.fit)
     if fit is None:
         raise SystemExit(f"the fit of base + {effect} failed")
     fit_eval, _ = evaluate(fit, split)

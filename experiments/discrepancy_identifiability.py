@@ -50,9 +50,10 @@ from peano_bayes.discovery.harness import (
     reference_sigma,
     snr_by_test,
     strength_for_snr,
+    true_model,
     true_parameters,
 )
-from peano_bayes.discovery.model import DEFAULT_BASE, NAMES, ModelSpec, model_spec
+from peano_bayes.discovery.model import DEFAULT_BASE, NAMES, ModelSpec
 from peano_bayes.discovery.workflow import fit_base
 from peano_bayes.inference.results import write_atomic_text
 
@@ -111,10 +112,7 @@ def main(argv=None) -> int:
         split = discovery_data(hidden_dataset(case, args.seed, {effect: strength}))
         best_base = fit_base(DEFAULT_BASE, split.fit, starts=4, seed=args.seed)
         truth = {n: v for n, v in true_parameters((effect,), {effect: strength}).items() if n in NAMES}
-        true_spec = model_spec((*DEFAULT_BASE, effect), truth)
-        x0 = true_spec.pinned.copy()
-        for n, v in truth.items():
-            x0[NAMES.index(n)] = v
+        true_spec, x0 = true_model(effect, strength)
         (effect_fit,) = fit_models([true_spec], [x0], split.fit)
         left_effect = _left(effect_fit, split) if effect_fit is not None else {}
         left_base = _left(best_base, split)

@@ -29,6 +29,7 @@ from ..inference.likelihood import OBSERVED, SPECIMEN_SCALED
 from ..physics import ModelConfig
 from ..rig import RigNoise, RigProtocol, RigSimulationError, simulate_dataset
 from .effects import CONFUSABLE, OPEN_ORIFICE_M2, PHYSICS_EFFECTS
+from .model import DEFAULT_BASE, NAMES, ModelSpec, model_spec
 
 MATERIAL = "PC"
 TRUTH_CONFIG = ModelConfig(bending=True, tensile=True, extension=False, friction="none")
@@ -152,6 +153,17 @@ def true_parameters(effects: tuple[str, ...], strengths: dict) -> dict:
     return params
 
 
+def true_model(effect: str, strength: float) -> tuple[ModelSpec, np.ndarray]:
+    """The discovery model with the default base plus ``effect``, and its start (d,) at the hidden truth
+    (:func:`true_parameters`): what probes fit to measure the misfit the true structure leaves."""
+    truth = {n: v for n, v in true_parameters((effect,), {effect: strength}).items() if n in NAMES}
+    spec = model_spec((*DEFAULT_BASE, effect), truth)
+    start = spec.pinned.copy()
+    for name, value in truth.items():
+        start[NAMES.index(name)] = value
+    return spec, start
+
+
 def reference_sigma(test: str) -> float:
     """The rig's per-sample noise sd of ``test``'s observed signal at :data:`REFERENCE_FORCE_SD_N` [N or -]."""
     noise = rig_noise(REFERENCE_FORCE_SD_N)
@@ -252,5 +264,6 @@ __all__ = [
     "score",
     "snr_by_test",
     "strength_for_snr",
+    "true_model",
     "true_parameters",
 ]
