@@ -53,13 +53,16 @@ def _bins(split, part: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     return {t: (np.concatenate(o), np.concatenate(c)) for t, (o, c) in out.items()}
 
 
-def bound_rows(effect: str, strength: float, seed: int) -> list[dict]:
-    without = discovery_data(hidden_dataset(Case(force_sd_n=QUIET_FORCE_SD_N), seed))
+def bound_rows(effect: str, strength: float, seed: int, without) -> list[dict]:
+    """Per test: the bound for ``effect`` at ``strength`` against ``without`` (the same rig, no effect: a
+    :class:`SplitData`)."""
     with_ = discovery_data(hidden_dataset(Case((effect,), 1.0, force_sd_n=QUIET_FORCE_SD_N), seed, {effect: strength}))
+    held, held_off = _bins(with_, "held_out"), _bins(without, "held_out")
+    fitted, fitted_off = _bins(with_, "fit"), _bins(without, "fit")
     rows = []
-    for test in sorted(_bins(without, "held_out")):
-        (a, counts), (b, _) = _bins(with_, "held_out")[test], _bins(without, "held_out")[test]
-        (af, _), (bf, _) = _bins(with_, "fit")[test], _bins(without, "fit")[test]
+    for test in sorted(held_off):
+        (a, counts), (b, _) = held[test], held_off[test]
+        (af, _), (bf, _) = fitted[test], fitted_off[test]
         ok, okf = np.isfinite(a) & np.isfinite(b), np.isfinite(af) & np.isfinite(bf)
         signal = float(np.sqrt(np.mean((a[ok] - b[ok]) ** 2)))
         noise = float(np.sqrt(np.mean(per_sample_sigma(test) ** 2 / counts[ok])))
@@ -86,9 +89,10 @@ def main(argv=None) -> int:
     enable_compilation_cache()
     out = Path(args.out)
     strengths = json.loads((out / "strengths.json").read_text())
+    without = discovery_data(hidden_dataset(Case(force_sd_n=QUIET_FORCE_SD_N), args.seed))
     rows = []
     for effect in args.effects:
-        rows += bound_rows(effect, strengths[f"{effect}@{args.snr:g}"], args.seed)
+        rows += bound_rows(effect, strengths[f"{effect}@{args.snr:g}"], args.seed, without)
         print(f"{effect}: smallest bound {min(r['bound'] for r in rows if r['effect'] == effect):.2f}", flush=True)
     table = pd.DataFrame(rows)
     write_atomic_text(out / "gap_bound.csv", table.to_csv(index=False, float_format="%.4g"))

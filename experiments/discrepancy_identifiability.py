@@ -51,7 +51,6 @@ from peano_bayes.discovery.harness import (
     snr_by_test,
     strength_for_snr,
     true_model,
-    true_parameters,
 )
 from peano_bayes.discovery.model import DEFAULT_BASE, NAMES, ModelSpec
 from peano_bayes.discovery.workflow import fit_base
@@ -73,12 +72,13 @@ def _left(fit, split) -> dict:
     return out
 
 
-def _coupon_fit(free_base, truth: dict, factor: float, split):
-    """The base refitted with its tensile parameters pinned at ``factor`` x the truth (a coupon test)."""
+def _coupon_fit(free_base, truth, factor: float, split):
+    """The base refitted with its tensile parameters pinned at ``factor`` x their values in ``truth`` (d,) (a
+    coupon test)."""
     mask, pinned = free_base.spec.mask.copy(), free_base.spec.pinned.copy()
     for name in TENSILE:
         i = NAMES.index(name)
-        mask[i], pinned[i] = False, truth[name] * factor
+        mask[i], pinned[i] = False, truth[i] * factor
     spec = ModelSpec(free_base.spec.active, mask, pinned)
     (fit,) = fit_models([spec], [np.where(mask, free_base.x, pinned)], split.fit)
     return fit
@@ -111,14 +111,13 @@ def main(argv=None) -> int:
         case = Case((effect,), args.snr, force_sd_n=REFERENCE_FORCE_SD_N / args.shrink)
         split = discovery_data(hidden_dataset(case, args.seed, {effect: strength}))
         best_base = fit_base(DEFAULT_BASE, split.fit, starts=4, seed=args.seed)
-        truth = {n: v for n, v in true_parameters((effect,), {effect: strength}).items() if n in NAMES}
         true_spec, x0 = true_model(effect, strength)
         (effect_fit,) = fit_models([true_spec], [x0], split.fit)
         left_effect = _left(effect_fit, split) if effect_fit is not None else {}
         left_base = _left(best_base, split)
         left_coupon = {}
         for factor in args.coupon:
-            fit = _coupon_fit(best_base, truth, factor, split)
+            fit = _coupon_fit(best_base, x0, factor, split)
             left_coupon[factor] = _left(fit, split) if fit is not None else {}
         nominal = snr_by_test(effect, strength)
         for test in left_base:

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +35,9 @@ import pandas as pd
 from peano_bayes.discovery.effects import PHYSICS_EFFECTS
 from peano_bayes.inference.calibration import wilson_interval
 from peano_bayes.inference.results import write_atomic_text
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from discrepancy_benchmark import markdown  # noqa: E402
 
 FALSE_POSITIVE_TARGET = 0.15
 RECALL_TARGET = 0.7
@@ -149,14 +153,6 @@ def gate_rows(runs) -> list[dict]:
     return rows
 
 
-def _markdown(table: pd.DataFrame) -> str:
-    cols = list(table.columns)
-    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
-    for _, r in table.iterrows():
-        lines.append("| " + " | ".join(f"{v:.2f}" if isinstance(v, float) else str(v) for v in r) + " |")
-    return "\n".join(lines)
-
-
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("out", help="a benchmark output directory with runs-*.jsonl")
@@ -181,12 +177,12 @@ def main(argv=None) -> int:
         "",
         f"## Best single statistic per effect: recall with the false-positive rate held <= {FALSE_POSITIVE_TARGET}",
         "",
-        _markdown(best[["effect", "snr", "statistic", "n_hidden", "recall_at_fp_target"]]),
+        markdown(best[["effect", "snr", "statistic", "n_hidden", "recall_at_fp_target"]], index=False),
         "",
         f"## Best single statistic per effect: false-positive rate at a recall whose Wilson lower bound is >= "
         f"{RECALL_TARGET}",
         "",
-        _markdown(
+        markdown(
             cheapest[
                 [
                     "effect",
@@ -197,12 +193,13 @@ def main(argv=None) -> int:
                     "fp_rate_at_recall_target",
                     "fp_wilson_high_at_recall_target",
                 ]
-            ]
+            ],
+            index=False,
         ),
         "",
         "## The gates as run, and with one dropped (round 0)",
         "",
-        _markdown(as_run[["effect", "snr", "recall_upper", "fp_rate"]]),
+        markdown(as_run[["effect", "snr", "recall_upper", "fp_rate"]], index=False),
         "",
         "Every gate dropped in turn: `tradeoff_gates.csv`; every statistic: `tradeoff.csv`.",
     ]
