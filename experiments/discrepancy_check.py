@@ -3,10 +3,10 @@ runs whose old verdicts are known (tuning evidence, never the final benchmark's 
 
     python experiments/discrepancy_check.py OUT.jsonl drift:3003 hysteresis:3000 none:3000
 
-A pair is ``LABEL:SEED``; LABEL is ``drift``, ``none`` (force noise 0.2 N) or hidden effect names joined by
-``+`` (at SNR 2, strengths from ``discrepancy/strengths.json``). One JSON line per run is appended to OUT.jsonl
-(verdict, accepted steps with their held-out delta elpd, the flexible terms described, every screened
-candidate's evidence); one summary line per run is printed.
+A pair is ``LABEL:SEED``; LABEL is ``drift``, ``none`` (force noise 0.2 N), ``none@SD`` (force noise SD [N]) or
+hidden effect names joined by ``+`` (at SNR 2, strengths from ``discrepancy/strengths.json``). One JSON line per
+run is appended to OUT.jsonl (verdict, accepted steps with their held-out delta elpd, the flexible terms
+described, every screened candidate's evidence); one summary line per run is printed.
 """
 
 from __future__ import annotations
@@ -28,6 +28,8 @@ def case_of(label: str) -> Case:
         return Case(drift=True)
     if label == "none":
         return Case(force_sd_n=0.2)
+    if label.startswith("none@"):
+        return Case(force_sd_n=float(label.removeprefix("none@")))
     return Case(tuple(label.split("+")), 2.0)
 
 
