@@ -5,13 +5,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from peano_bayes.inference.likelihood import (
     DEFAULT_BIN_SIZES,
     bin_means,
     log_likelihood,
     pointwise_log_likelihood,
+    predict,
     prepare,
+    sample_times,
 )
 from peano_bayes.physics import DEFAULT_CONFIG
 from peano_bayes.rig import RigNoise, simulate_dataset
@@ -107,3 +111,49 @@ def test_binning_barely_moves_the_likelihood_surface(dataset, truth):
     peak_bin, curv_bin = profile(4)
     assert abs(peak_bin - peak_raw) < 0.02
     assert curv_bin == pytest.approx(curv_raw, rel=0.15)
+
+
+@settings(max_examples=200, deadline=None)
+@given(n=st.integers(1, 40), k=st.integers(1, 7), jitter=st.floats(0.0, 0.4))
+def test_sample_times_keep_every_bins_own_samples_and_mean(n, k, jitter):
+    """``k`` nodes per bin; a full bin's nodes are its sample times, every bin's nodes average to the bin's mean
+    time (a signal linear in time is reproduced exactly in the short last bin too), and evenly sampled runs of two
+    or more samples give strictly increasing nodes."""
+    time = np.arange(n) + jitter * np.sin(np.arange(n))  # increasing, unevenly spaced
+    nodes = sample_times(time, k)
+    m = -(-n // k)
+    assert nodes.shape == (k * m,)
+    full = (n // k) * k
+    np.testing.assert_array_equal(nodes[:full], time[:full])
+    centre, _ = bin_means(time, k)
+    np.testing.assert_allclose(nodes.reshape(m, k).mean(axis=1), centre, rtol=0, atol=1e-12)
+    if n > 1:  # a one-sample run has no interval to spread its nodes in
+        assert np.all(np.diff(sample_times(0.01 * np.arange(n), k)) > 0)
+
+
+def test_every_sample_bins_are_the_bin_means_of_one_sample_predictions(dataset, truth):
+    """Blocking binned by 4 with every sample simulated predicts exactly the bin means of the one-sample
+    prediction, kinks included (the two-node quadrature does not: at the ramp start it differs)."""
+    blocking = type(dataset)(
+        dataset.material,
+        dataset.geometry,
+        dataset.conditions,
+        [r for r in dataset.runs if r.test == "blocking"],
+        dataset.provenance,
+    )
+    k = 4
+    (one,) = prepare(blocking, {"blocking": 1}).groups
+    (every,) = prepare(blocking, {"blocking": k}, every_sample=frozenset({"blocking"})).groups
+    (two,) = prepare(blocking, {"blocking": k}).groups
+    n = one.observed.shape[1]
+    full = n // k
+    per_sample, _ = predict(truth, one)
+    expected = np.stack([bin_means(np.asarray(row), k)[0] for row in per_sample])
+    got, _ = predict(truth, every)
+    got = np.asarray(got)
+    np.testing.assert_allclose(got[:, :full], expected[:, :full], rtol=1e-9, atol=1e-9)
+    if n % k:
+        assert k % (n % k) == 0  # the short last bin repeats its samples, spread by a thousandth of a step
+        np.testing.assert_allclose(got[:, full:], expected[:, full:], rtol=1e-5, atol=1e-4)
+    quadrature, _ = predict(truth, two)
+    assert float(np.max(np.abs(np.asarray(quadrature) - expected))) > 1e-3

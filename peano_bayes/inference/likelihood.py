@@ -113,7 +113,8 @@ class RunGroup:
 
     @property
     def points_per_bin(self) -> int:
-        """Simulated points per bin: 2 where bins average several samples (quadrature), else 1."""
+        """Simulated points per bin: 1 for one-sample bins, else 2 (quadrature) or the bin size (every
+        sample simulated)."""
         return self.time_s.shape[1] // self.observed.shape[1]
 
     @property
@@ -189,17 +190,50 @@ def quadrature_times(time_s: np.ndarray, k: int) -> np.ndarray:
     return np.stack([centre - spread, centre + spread], axis=1).ravel()
 
 
-def _reduce_run(run, k: int, denoise: bool) -> dict:
-    """One run binned by ``k``: simulation times and inputs (two per bin, :func:`quadrature_times`; driving
-    inputs denoised), observed bin means, counts, and the raw noise sd of each driving input (for
-    :func:`_share_repeats`)."""
+#: Spread of the repeated nodes of a short last bin, in units of the shortest sample interval (see
+#: :func:`sample_times`): small enough that a kink between them is invisible, large enough for a time step.
+REPEAT_SPREAD = 1e-3
+
+
+def sample_times(time_s: np.ndarray, k: int) -> np.ndarray:
+    """(k m,) ``k`` simulation times per bin of ``k`` samples: a full bin's own sample times, so the mean of the
+    simulated signal is the bin mean of a per-sample simulation whatever its shape in the bin (kinks included).
+
+    A shorter last bin of ``c`` samples, when ``c`` divides ``k``, gets each sample ``k / c`` times, spread
+    symmetrically by :data:`REPEAT_SPREAD` of the sample interval (repeats would put zero time steps into the
+    time-stepping simulations); otherwise ``k`` nodes placed symmetrically with the bin's mean time and sd (those
+    of :func:`quadrature_times`: exact for cubics)."""
+    time_s = np.asarray(time_s, dtype=float)
+    full = (time_s.size // k) * k
+    c = time_s.size - full
+    if c == 0:
+        return time_s
+    if k % c == 0 and time_s.size > 1:
+        step = REPEAT_SPREAD * float(np.min(np.diff(time_s)))
+        offsets = step * np.linspace(-1.0, 1.0, k // c) if k // c > 1 else np.zeros(1)
+        tail = (time_s[full:, None] + offsets[None, :]).ravel()
+    else:
+        low, high = quadrature_times(time_s, k)[-2:]
+        z = np.linspace(-1.0, 1.0, k)
+        z = z / np.sqrt(np.mean(z**2)) if k > 1 else z
+        tail = 0.5 * (low + high) + 0.5 * (high - low) * z
+    return np.concatenate([time_s[:full], tail])
+
+
+def _reduce_run(run, k: int, denoise: bool, every_sample: bool = False) -> dict:
+    """One run binned by ``k``: simulation times and inputs (two per bin, :func:`quadrature_times`, or with
+    ``every_sample`` ``k`` per bin, :func:`sample_times`; driving inputs denoised), observed bin means, counts,
+    and the raw noise sd of each driving input (for :func:`_share_repeats`)."""
     signal, _ = OBSERVED[run.test]
     driving = DRIVING_INPUTS[run.test] if denoise else ()
     if run.test == "step" and run.supply_pa is None:
         raise ValueError(f"step run {run.key} has no supply pressure; the step likelihood needs supply_kpa")
     out, input_sd = {}, {}
     centre, _ = bin_means(run.time_s, k)
-    sim_time = quadrature_times(run.time_s, k) if k > 1 else run.time_s
+    if k == 1:
+        sim_time = run.time_s
+    else:
+        sim_time = sample_times(run.time_s, k) if every_sample else quadrature_times(run.time_s, k)
     for name in ("strain", "pressure_pa", "supply_pa"):
         raw = getattr(run, name)
         if raw is None:
@@ -253,17 +287,19 @@ def prepare(
     stroke_load_n: float = 5.5,
     denoise_inputs: bool = True,
     share_repeats: bool = True,
+    every_sample: frozenset = frozenset(),
 ) -> Observations:
     """Reduce ``dataset`` for the likelihood: denoise the driving inputs (``denoise_inputs``, see
     :data:`DRIVING_INPUTS`), bin every run (``bin_sizes`` by test), stack runs of a test that have the same
     number of bins, and let repeats of one protocol share a simulation from their averaged denoised inputs
     (``share_repeats``; only with ``denoise_inputs``). ``stroke_load_n`` [N] is used where a stroke run
-    records no load."""
+    records no load. Tests in ``every_sample`` are simulated at every sample and the predictions averaged per
+    bin (:func:`sample_times`) instead of at two quadrature nodes per bin."""
     bin_sizes = MappingProxyType({**DEFAULT_BIN_SIZES, **dict(bin_sizes)})
     specimens = tuple(dataset.specimens)
     buckets: dict[tuple[str, int], list] = {}
     for run in dataset.runs:
-        reduced = _reduce_run(run, bin_sizes[run.test], denoise_inputs)
+        reduced = _reduce_run(run, bin_sizes[run.test], denoise_inputs, run.test in every_sample)
         if reduced["load_n"] is None:
             if run.test == "step":
                 raise ValueError(f"step run {run.key} records no load; the step likelihood needs load_n")
@@ -432,4 +468,6 @@ __all__ = [
     "pointwise_log_likelihood",
     "predict",
     "prepare",
+    "quadrature_times",
+    "sample_times",
 ]
