@@ -18,7 +18,7 @@ import pytest
 from peano_bayes.cli import main
 from peano_bayes.data import save
 from peano_bayes.discovery import LIBRARY, discover, discovery_data
-from peano_bayes.discovery.data import DISCOVERY_BIN_SIZES
+from peano_bayes.discovery.data import DISCOVERY_BIN_SIZES, DISCOVERY_EVERY_SAMPLE
 from peano_bayes.discovery.diagnose import diagnose, signature_statistic
 from peano_bayes.discovery.effects import (
     BASELINE_PARAMETERS,
@@ -133,7 +133,7 @@ def test_discovery_inputs_share_pressure_within_a_condition_and_keep_each_runs_s
     specimen = split.specimen
     own = replace(dataset, runs=tuple(r for r in dataset.runs if r.specimen == specimen))
     per_run = {}
-    for group in prepare(own, DISCOVERY_BIN_SIZES, share_repeats=False).groups:
+    for group in prepare(own, DISCOVERY_BIN_SIZES, share_repeats=False, every_sample=DISCOVERY_EVERY_SAMPLE).groups:
         for row, key in enumerate(group.keys):
             supply = None if group.supply_pa is None else group.supply_pa[row]
             per_run[key] = (group.strain[row], group.pressure_pa[row], supply)
