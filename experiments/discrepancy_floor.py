@@ -8,7 +8,9 @@ pressure sensors keep the rig's noise, so input denoising errors stay real), fit
 with the discovery bins (4 samples in the quasi-static tests) and with one-sample bins, and reports the fitted
 runs' residual RMS and mean per test and pressure quintile, in units of the rig's per-sample noise at 0.2 N.
 A floor that one-sample bins remove is the bin quadrature (two points per bin, exact only for signals cubic in
-time within a bin); one that stays comes from the inputs or the model.
+time within a bin); one that stays comes from the inputs or the model. Since 4c9a133 the discovery bins of
+blocking and stroke are predicted from every sample (``DISCOVERY_EVERY_SAMPLE``), so there only the load cycles
+keep two points per bin; the committed ``discrepancy-6000/FLOOR-*`` files were made before, with two points.
 
     python experiments/discrepancy_floor.py --effect threshold_pressure
 
