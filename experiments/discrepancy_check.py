@@ -26,10 +26,9 @@ HERE = Path(__file__).resolve().parent
 def case_of(label: str) -> Case:
     if label == "drift":
         return Case(drift=True)
-    if label == "none":
-        return Case(force_sd_n=0.2)
-    if label.startswith("none@"):
-        return Case(force_sd_n=float(label.removeprefix("none@")))
+    name, _, sd = label.partition("@")
+    if name == "none":
+        return Case(force_sd_n=float(sd or 0.2))
     return Case(tuple(label.split("+")), 2.0)
 
 
