@@ -10,7 +10,8 @@ runs' residual RMS and mean per test and pressure quintile, in units of the rig'
 A floor that one-sample bins remove is the bin quadrature (two points per bin, exact only for signals cubic in
 time within a bin); one that stays comes from the inputs or the model. Since 4c9a133 the discovery bins of
 blocking and stroke are predicted from every sample (``DISCOVERY_EVERY_SAMPLE``), so there only the load cycles
-keep two points per bin; the committed ``discrepancy-6000/FLOOR-*`` files were made before, with two points.
+keep two points per bin; the committed ``discrepancy-6000/FLOOR-*`` files were made before, with two points,
+and ``discrepancy-8000/FLOOR-*`` with the landed version (``--out experiments/discrepancy-8000``).
 
     python experiments/discrepancy_floor.py --effect threshold_pressure
 
