@@ -168,7 +168,7 @@ def report_markdown(report: dict) -> str:
             lines.append(f"- round {i}, `{name}` ({LIBRARY[name].kind}): delta elpd {ev['delta_elpd']:.1f}; {status}")
     lines += [
         "",
-        "Held-out runs are the second repeat of every test condition; gates and thresholds: "
+        "Held-out runs are the last repeat of every test condition; gates and thresholds: "
         + ", ".join(f"{k} {v}" for k, v in report["gates"].items())
         + ".",
         "",
