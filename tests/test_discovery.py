@@ -127,7 +127,8 @@ def test_session_baseline_adds_legendre_polynomials_of_session_time_to_the_force
 
 def test_discovery_inputs_share_pressure_within_a_condition_and_keep_each_runs_strain():
     """Pressure inputs (muscle, and supply in steps) are the mean over the runs of a condition (test and, for load
-    cycles, pressure level); strain stays each run's own; fit and held-out runs of a condition get one mean."""
+    cycles, pressure level); strain stays each run's own; fit and held-out runs of a condition get one mean; the
+    held-out run of each condition is its last."""
     dataset = hidden_dataset(Case(("cyclic_softening",), 4.0), seed=104)
     split = discovery_data(dataset)
     specimen = split.specimen
@@ -161,6 +162,9 @@ def test_discovery_inputs_share_pressure_within_a_condition_and_keep_each_runs_s
             seen.add(key)
     assert seen == set(split.fit_runs) | set(split.held_out_runs) == set(runs)
     assert {"load_cycle", "blocking", "stroke", "step"} <= {g.test for g in split.both.groups}
+    # Leave-future-out: the held-out run of every condition is its last (a softening specimen is predicted forward).
+    last = {max(peers, key=lambda key: runs[key].run) for peers in members.values()}
+    assert set(split.held_out_runs) == last and len(last) == len(members)
 
 
 @pytest.fixture(scope="module")
