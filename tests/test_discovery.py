@@ -388,3 +388,26 @@ def test_identification_gate_needs_a_strong_held_out_gain_only_on_a_correlation_
     edge = gates.max_correlation + 1e-9
     assert identified(edge, gates.ridge_elpd_z, 1.0, gates)
     assert not identified(edge, 0.999 * gates.ridge_elpd_z, 1.0, gates)
+
+
+def test_fit_models_solves_in_batches_of_one_shape(monkeypatch):
+    """Every vmapped solve gets (BATCH, d) arrays, whatever the number of fits, so the solver is traced and
+    compiled once (a call on all n at once compiled once per distinct n); the starts reach it in order."""
+    import peano_bayes.discovery.fitting as fitting
+
+    calls = []
+
+    def fake_solve(u0, masks, pinned, data):
+        calls.append((np.asarray(u0), masks.shape, pinned.shape))
+        k = u0.shape[0]
+        return u0, np.full(k, np.inf), np.zeros(k, dtype=bool)  # every fit "failed": no Laplace step
+
+    monkeypatch.setattr(fitting, "_solve", fake_solve)
+    spec = model_spec(DEFAULT_BASE, TRUTH_PARAMS)
+    starts = [spec.pinned * (1.0 + 0.01 * i) for i in range(fitting.BATCH + 1)]
+    assert fitting.fit_models([spec] * len(starts), starts, data=None) == [None] * len(starts)
+    d = len(NAMES)
+    assert [c[0].shape for c in calls] == [(fitting.BATCH, d)] * 2
+    assert all(c[1] == c[2] == (fitting.BATCH, d) for c in calls)
+    sent = np.concatenate([c[0] for c in calls])[: len(starts)]
+    np.testing.assert_array_equal(sent, np.stack([to_unconstrained(s) for s in starts]))

@@ -121,15 +121,19 @@ def _laplace(u, spec: ModelSpec, data: DiscoveryData) -> tuple[dict, np.ndarray]
 
 
 def fit_models(specs, starts, data: DiscoveryData) -> list[ModelFit | None]:
-    """Fit each ``specs[i]`` from ``starts[i]`` (values (d,) [SI]) in one vmapped solve; ``None`` where the fit
-    failed (non-finite, or the physics solver missed its tolerance)."""
+    """Fit each ``specs[i]`` from ``starts[i]`` (values (d,) [SI]) in vmapped solves of :data:`BATCH` fits;
+    ``None`` where the fit failed (non-finite, or the physics solver missed its tolerance)."""
     n = len(specs)
     pad = -n % BATCH  # one batch size, one compilation: pad with copies of the last fit
     specs, starts = list(specs) + [specs[-1]] * pad, list(starts) + [starts[-1]] * pad
-    u0 = jnp.asarray(np.stack([to_unconstrained(s) for s in starts]))
-    masks = jnp.asarray(np.stack([s.mask for s in specs]))
-    pinned = jnp.asarray(np.stack([s.pinned for s in specs]))
-    us, costs, converged = (np.asarray(a)[:n] for a in _solve(u0, masks, pinned, data))
+    u0 = np.stack([to_unconstrained(s) for s in starts])
+    masks = np.stack([s.mask for s in specs])
+    pinned = np.stack([s.pinned for s in specs])
+    # Batch by batch: a (BATCH, d) shape every call, where one call on all n would compile once per distinct n.
+    solved = [
+        _solve(*(jnp.asarray(a[i : i + BATCH]) for a in (u0, masks, pinned)), data) for i in range(0, len(specs), BATCH)
+    ]
+    us, costs, converged = (np.concatenate([np.asarray(b[k]) for b in solved])[:n] for k in range(3))
     out = []
     for spec, u, cost, conv in zip(specs[:n], us, costs, converged, strict=True):
         if not np.isfinite(cost):
