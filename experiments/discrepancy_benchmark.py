@@ -2,7 +2,7 @@
 
 Cases (peano_bayes.discovery.harness): each hideable library effect at several signal-to-noise ratios; no
 effect at several noise levels (false positives); slow load-cell drift (outside the library); two effects at
-once. ``--seeds`` seeds per case, starting at ``--first-seed`` (default 9000). Seed history: tuning used 0-9, the
+once. ``--seeds`` seeds per case, starting at ``--first-seed`` (default 10000). Seed history: tuning used 0-9, the
 tests use 100-199, a first final run on 1000-1019 was stopped after 6 runs (non-confusable rivals made verdicts
 ambiguous), and a full run on 2000-2019 (SNR 1, 2, 4; ``Gates.min_elpd_z`` 1.0) became tuning evidence for the
 gates: it is kept in ``discrepancy/tuning/``. The final run on 3000-3021 (workflow of commit b3a1ce2, in
@@ -20,9 +20,11 @@ same workflow (``--cases none drift threshold_pressure``, ``discrepancy-7000/PRE
 (``discrepancy-6000/tuning/exact_bin_means/``), adopted in 4c9a133 before its final run on 8000-8021
 (``discrepancy-8000/PREREGISTRATION.md``). Seeds 8000-8021 were then used again to tune holding out the last
 repeat of each condition instead of the second (``discrepancy-8000/tuning/last_repeat_held_out/``), adopted
-before its final run on 9000-9021 (``discrepancy-9000/PREREGISTRATION.md``): that is the current final run, and
-the defaults run it. A final run of any later workflow change starts at ``--first-seed 10000``. None of these
-seeds is reused for a final run.
+before its final run on 9000-9021 (``discrepancy-9000/PREREGISTRATION.md``). Seeds 9000-9021 were then used again
+to tune letting the sensor's offset and gain compete with physics on held-out gain
+(``discrepancy-9000/tuning/offset_competes/``), adopted before its final run on 10000-10021
+(``discrepancy-10000/PREREGISTRATION.md``): that is the current final run, and the defaults run it. A final run
+of any later workflow change starts at ``--first-seed 11000``. None of these seeds is reused for a final run.
 The label never reaches ``discover``.
 
 Resumable: every finished run is one line of ``OUT/runs-<worker>.jsonl``; a rerun skips what is there. Writes
@@ -300,11 +302,11 @@ def analyse(rows: list[dict], out: Path, pooled_from=()) -> dict:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", default=str(HERE / "discrepancy-9000"), help="output directory")
+    parser.add_argument("--out", default=str(HERE / "discrepancy-10000"), help="output directory")
     parser.add_argument("--snr", type=float, nargs="+", default=[2.0], help="signal-to-noise ratios")
     parser.add_argument("--noise", type=float, nargs="+", default=[0.1, 0.2, 0.4], help="force noise levels [N]")
     parser.add_argument("--seeds", type=int, default=22, help="seeds per case")
-    parser.add_argument("--first-seed", type=int, default=9000)
+    parser.add_argument("--first-seed", type=int, default=10000)
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument(
         "--cases",

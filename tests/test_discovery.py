@@ -46,7 +46,7 @@ from peano_bayes.discovery.model import (
     to_unconstrained,
     to_values,
 )
-from peano_bayes.discovery.workflow import Gates, identified, strength_wald
+from peano_bayes.discovery.workflow import Gates, identified, preference_order, strength_wald
 from peano_bayes.inference.calibration import wilson_interval
 from peano_bayes.inference.likelihood import predict, prepare
 
@@ -411,3 +411,25 @@ def test_fit_models_solves_in_batches_of_one_shape(monkeypatch):
     assert all(c[1] == c[2] == (fitting.BATCH, d) for c in calls)
     sent = np.concatenate([c[0] for c in calls])[: len(starts)]
     np.testing.assert_array_equal(sent, np.stack([to_unconstrained(s) for s in starts]))
+
+
+def test_sensor_offset_and_gain_compete_with_physics_but_widening_noise_comes_last():
+    """A passing sensor offset with the largest held-out gain is accepted before a passing physics effect (drift
+    runs were named as relaxation when every noise model yielded); heteroscedastic noise, which can mimic any
+    misfit, only when nothing else passed, whatever its gain."""
+    from types import SimpleNamespace
+
+    def passing(**gains):
+        return [SimpleNamespace(name=n, evidence={"delta_elpd": g}) for n, g in gains.items()]
+
+    names = lambda cs: [c.name for c in preference_order(cs)]  # noqa: E731
+    assert names(passing(viscoelastic_relaxation=42.0, sensor_offset=114.0, sensor_gain=71.0)) == [
+        "sensor_offset",
+        "sensor_gain",
+        "viscoelastic_relaxation",
+    ]
+    assert names(passing(hysteresis=20.0, heteroscedastic_noise=300.0, session_baseline=30.0)) == [
+        "session_baseline",
+        "hysteresis",
+    ]
+    assert names(passing(heteroscedastic_noise=5.0)) == ["heteroscedastic_noise"]

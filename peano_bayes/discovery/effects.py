@@ -267,6 +267,11 @@ PHYSICS_EFFECTS: tuple[str, ...] = tuple(e.name for e in _LIST if e.kind == "phy
 NOISE_EFFECTS: tuple[str, ...] = tuple(e.name for e in _LIST if e.kind == "noise")
 #: Flexible terms: they describe leftover structure and never name an effect.
 FLEXIBLE_TERMS: tuple[str, ...] = tuple(e.name for e in _LIST if e.kind == "flexible")
+#: Noise-side effects that widen the noise instead of moving the prediction: they can mimic any misfit, so the
+#: workflow accepts them only when nothing else passes (a sensor offset or gain moves the prediction and competes
+#: with physics on held-out gain).
+WIDENING_NOISE: tuple[str, ...] = ("heteroscedastic_noise",)
+assert set(WIDENING_NOISE) <= set(NOISE_EFFECTS)
 
 #: Pairs the rig's four tests cannot always tell apart, and the experiment that separates them
 #: (research/DISCREPANCY.md section 2). An ``ambiguous`` verdict names one of these.
@@ -309,6 +314,7 @@ __all__ = [
     "OPEN_ORIFICE_M2",
     "PHYSICS_EFFECTS",
     "RIGID_TENSILE_N_PER_M",
+    "WIDENING_NOISE",
     "check_effects",
     "parameter_spec",
 ]
