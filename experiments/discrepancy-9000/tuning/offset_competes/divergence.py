@@ -13,12 +13,13 @@ import json
 from collections import Counter
 from pathlib import Path
 
+from peano_bayes.discovery.effects import NOISE_EFFECTS, WIDENING_NOISE
+
 HERE = Path(__file__).resolve().parent
-NOISE = {"sensor_offset", "sensor_gain", "heteroscedastic_noise"}
 
 
 def pick(passing: dict, new: bool) -> str:
-    preferred = [c for c in passing if (c != "heteroscedastic_noise" if new else c not in NOISE)]
+    preferred = [c for c in passing if c not in (WIDENING_NOISE if new else NOISE_EFFECTS)]
     return max(preferred or list(passing), key=passing.get)
 
 
