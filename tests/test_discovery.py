@@ -46,7 +46,7 @@ from peano_bayes.discovery.model import (
     to_unconstrained,
     to_values,
 )
-from peano_bayes.discovery.workflow import Gates, identified, preference_order, strength_wald
+from peano_bayes.discovery.workflow import Gates, identified, preference_order, strength_wald, within_two_se
 from peano_bayes.inference.calibration import wilson_interval
 from peano_bayes.inference.likelihood import predict, prepare
 
@@ -243,6 +243,8 @@ def test_discover_cli_names_hidden_hysteresis_and_shrinks_the_gap(hysteresis_dat
     # Named first and alone; the verdict may be ambiguous with a pre-declared confusable rival (one strain rate
     # cannot tell friction from a Maxwell loop), which the benchmark and research/DISCREPANCY.md count as right.
     assert report["named"] == ["hysteresis"] and report["steps"][0]["effect"] == "hysteresis"
+    for step in report["steps"]:  # a tie is either a confusable rival or a close call, never both
+        assert not set(step["rivals"]) & set(step["close_calls"]) and step["effect"] not in step["close_calls"]
     assert score(Case(("hysteresis",), 4.0), report)["correct"], report["verdict"]
     assert (tmp_path / "out" / "report.md").read_text().count("hysteresis") >= 2
     assert (tmp_path / "out" / "figures" / "residuals.png").stat().st_size > 10_000
@@ -433,3 +435,64 @@ def test_sensor_offset_and_gain_compete_with_physics_but_widening_noise_comes_la
         "hysteresis",
     ]
     assert names(passing(heteroscedastic_noise=5.0)) == ["heteroscedastic_noise"]
+
+
+def test_held_out_ties_within_two_standard_errors_of_block_sums():
+    """A tie: the winner's held-out gain over the other is below two standard errors of its per-block sums. An
+    exact tie (equal predictions) is a tie; a gain in every block is not; block sums, not points, set the error."""
+    rng = np.random.default_rng(106)
+    blocks = np.repeat(np.arange(20), 10)
+    other = rng.normal(size=200)
+    assert within_two_se(other, other, blocks)
+    assert not within_two_se(other + 1.0 + 0.1 * rng.normal(size=200), other, blocks)
+    # A constant gain of 0.05 per point is sure (block sums without spread); the same gain under noise shared
+    # within each block (block sums of sd 5 around 0.5) is within two standard errors.
+    assert not within_two_se(other + 0.05, other, blocks)
+    correlated = np.repeat(rng.normal(size=20), 10) * 0.5
+    assert within_two_se(other + 0.05 + correlated, other, blocks)
+
+
+def test_report_names_close_calls_outside_the_confusable_pairs():
+    from peano_bayes.discovery.report import report_markdown
+
+    step = {
+        "effect": "sensor_offset",
+        "meaning": "a constant offset of the load cell",
+        "rivals": [],
+        "close_calls": ["series_compliance"],
+        "evidence": {
+            "delta_elpd": 435181.4,
+            "elpd_se": 114724.9,
+            "heldout_rmse_ratio": 0.4,
+            "delta_bic": -1e5,
+            "n_eff": 300.0,
+            "signature": "force_level",
+            "signature_before": 9.0,
+            "signature_after": 1.0,
+            "strength_z": {"sensor_offset_n": 12.0},
+            "strength_wald": 144.0,
+            "strength_wald_threshold": 3.84,
+            "max_correlation_with_base": 0.5,
+        },
+        "parameters": {"sensor_offset_n": {"value": 0.8, "sd": 0.07}},
+    }
+    gap = {"load_cycle": {"fit": {"rmse": 1.0, "max_error": 2.0}, "held_out": {"rmse": 1.0, "max_error": 2.0}}}
+    report = {
+        "specimen": "A",
+        "verdict": "none",
+        "named": [],
+        "ambiguous": [],
+        "described": [],
+        "noise_model": ["sensor_offset"],
+        "base": ["tensile_stiffness"],
+        "final_model": ["tensile_stiffness", "sensor_offset"],
+        "steps": [step],
+        "screened": [],
+        "gap": {"before": gap, "after": gap},
+        "gates": {"alpha": 0.01},
+    }
+    text = report_markdown(report)
+    assert "predicted the held-out runs as well within two standard errors: series_compliance" in text
+    assert "verdict stands" in text
+    step["close_calls"] = []
+    assert "series_compliance" not in report_markdown(report)

@@ -143,6 +143,12 @@ def report_markdown(report: dict) -> str:
         ]
         if step["rivals"]:
             lines.append(f"- Rivals within two standard errors: {', '.join(step['rivals'])}.")
+        if step.get("close_calls"):
+            lines.append(
+                f"- Also passed every gate and predicted the held-out runs as well within two standard errors: "
+                f"{', '.join(step['close_calls'])}. The library knows no confusion between them and "
+                f"`{step['effect']}`, so the verdict stands, but these tests hardly tell them apart."
+            )
         lines.append("")
     lines += [
         "## Gap before and after",

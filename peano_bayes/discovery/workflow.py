@@ -32,7 +32,9 @@ The evidence also records how much of the structure the diagnosis flagged the ca
 **Verdicts:** the physics effects added (``named``); ``ambiguous`` when a rival of a known confusable pair
 (:data:`~peano_bayes.discovery.effects.CONFUSABLE`) passed every gate with an elpd within two standard errors of
 the winner (the rivals and the experiment that separates them are reported; a passing candidate outside such a
-pair is screened again once the winner is in the model);
+pair is screened again once the winner is in the model, and is reported as a ``close_calls`` entry of the step:
+it fitted the held-out runs as well within two standard errors, though the library knows no confusion between the
+two, so the engineer sees the tie without the verdict changing);
 ``unexplained`` when structure is left and no candidate passes, or when the flexible session baseline was
 needed and no physics effect passed; ``none`` otherwise. Noise-side effects that pass are added and reported as
 the noise model, never as physics.
@@ -122,6 +124,14 @@ def identified(correlation: float, delta_elpd: float, elpd_se: float, gates: Gat
 def _blocks(cov_block: np.ndarray, values: np.ndarray) -> np.ndarray:
     index = np.unique(cov_block, return_inverse=True)[1]
     return np.bincount(index, weights=values)
+
+
+def within_two_se(best: np.ndarray, other: np.ndarray, blocks: np.ndarray) -> bool:
+    """Whether ``best``'s held-out log-likelihood (per point, shape (n,)) beats ``other``'s by less than two
+    standard errors, the errors from the per-block sums of the difference (``blocks``: each point's block)."""
+    d = _blocks(blocks, best - other)
+    se = float(np.sqrt(d.size) * np.std(d, ddof=1)) if d.size > 1 else float("inf")
+    return bool(d.sum() <= 2.0 * se)
 
 
 def _n_eff(r: np.ndarray) -> float:
@@ -308,7 +318,8 @@ def discover(split: SplitData, *, base=DEFAULT_BASE, gates: Gates = Gates(), see
     The report (:attr:`Discovery.report`) is a JSON-ready dict: ``verdict`` (one of :data:`VERDICTS`),
     ``named`` physics effects, ``noise_model`` noise-side effects, ``described`` flexible terms the data needed,
     ``ambiguous`` rival sets with the experiment that separates them,
-    ``steps`` (per accepted effect: evidence, gates, parameters with Laplace sd, RMSE before and after),
+    ``steps`` (per accepted effect: evidence, gates, parameters with Laplace sd, RMSE before and after, the
+    ``rivals`` of a confusable pair and other ``close_calls`` within two standard errors),
     ``screened`` (every candidate's evidence per iteration), ``gap`` (base vs final, fit and held-out),
     ``diagnoses`` and timings.
     """
@@ -359,22 +370,22 @@ def discover(split: SplitData, *, base=DEFAULT_BASE, gates: Gates = Gates(), see
         if not passing:
             stopped = "no_candidate_passes" if diag.structure_left else "no_structure"
             break
-        # Rivals are effects of a known confusable pair.
         pool = preference_order(passing)
         best = pool[0]
-        rivals = []
-        for c in pool[1:]:
-            if frozenset({best.name, c.name}) not in CONFUSABLE:
-                continue  # not a known confusion: the loser is screened again once the winner is in the model
-            d = _blocks(split.held_out_covariates.block, best.held_eval.loglik - c.held_eval.loglik)
-            se = float(np.sqrt(d.size) * np.std(d, ddof=1)) if d.size > 1 else float("inf")
-            if d.sum() < 2.0 * se:
-                rivals.append(c.name)
+        # Ties of a known confusable pair make the verdict ambiguous; other ties are reported as close calls
+        # only, and the loser is screened again once the winner is in the model.
+        ties = [
+            c.name
+            for c in pool[1:]
+            if within_two_se(best.held_eval.loglik, c.held_eval.loglik, split.held_out_covariates.block)
+        ]
+        rivals = [r for r in ties if frozenset({best.name, r}) in CONFUSABLE]
         step = {
             "effect": best.name,
             "kind": LIBRARY[best.name].kind,
             "meaning": LIBRARY[best.name].meaning,
             "rivals": rivals,
+            "close_calls": [r for r in ties if r not in rivals],
             "experiment": {
                 r: CONFUSABLE.get(frozenset({best.name, r}), "no known discriminating test") for r in rivals
             },
@@ -428,4 +439,14 @@ def discover(split: SplitData, *, base=DEFAULT_BASE, gates: Gates = Gates(), see
     return Discovery(report, split, first_fit, cur_fit)
 
 
-__all__ = ["Discovery", "Gates", "VERDICTS", "discover", "fit_base", "gap_table", "identified", "preference_order"]
+__all__ = [
+    "Discovery",
+    "Gates",
+    "VERDICTS",
+    "discover",
+    "fit_base",
+    "gap_table",
+    "identified",
+    "preference_order",
+    "within_two_se",
+]
