@@ -146,8 +146,8 @@ def report_markdown(report: dict) -> str:
         if step.get("close_calls"):
             lines.append(
                 f"- Also passed every gate and predicted the held-out runs as well within two standard errors: "
-                f"{', '.join(step['close_calls'])}. The library knows no confusion between them and "
-                f"`{step['effect']}`, so the verdict stands, but these tests hardly tell them apart."
+                f"{', '.join(step['close_calls'])}. The library declares no confusion with `{step['effect']}`, "
+                "so the verdict stands, but these tests hardly tell them apart."
             )
         lines.append("")
     lines += [

@@ -32,9 +32,8 @@ The evidence also records how much of the structure the diagnosis flagged the ca
 **Verdicts:** the physics effects added (``named``); ``ambiguous`` when a rival of a known confusable pair
 (:data:`~peano_bayes.discovery.effects.CONFUSABLE`) passed every gate with an elpd within two standard errors of
 the winner (the rivals and the experiment that separates them are reported; a passing candidate outside such a
-pair is screened again once the winner is in the model, and is reported as a ``close_calls`` entry of the step:
-it fitted the held-out runs as well within two standard errors, though the library knows no confusion between the
-two, so the engineer sees the tie without the verdict changing);
+pair is screened again once the winner is in the model and, if it too came within two standard errors, is
+reported in the step's ``close_calls``, so the engineer sees the tie without the verdict changing);
 ``unexplained`` when structure is left and no candidate passes, or when the flexible session baseline was
 needed and no physics effect passed; ``none`` otherwise. Noise-side effects that pass are added and reported as
 the noise model, never as physics.
