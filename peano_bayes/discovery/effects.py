@@ -290,6 +290,14 @@ CONFUSABLE: MappingProxyType = MappingProxyType(
 )
 
 
+#: Effects that stand in for another on one specimen's rig tests: the key's parameters absorb the listed
+#: effects, so a model without them is no evidence of their absence. A series mount on a linear film is exactly
+#: the film at the series stiffness ka / (1 + ka c) (tests/test_simulate.py); on a stiffening film only a mount
+#: large against the film departs from it, so the fitted tensile stiffness is the film and the mount together.
+ABSORBS: MappingProxyType = MappingProxyType({"tensile_stiffness": ("series_compliance",)})
+assert all({k, *v} <= set(LIBRARY) for k, v in ABSORBS.items())
+
+
 def check_effects(names) -> tuple[str, ...]:
     """Effect names in order, duplicates removed; an unknown name raises ``PeanoBayesInputError``."""
     from ..errors import PeanoBayesInputError, did_you_mean
@@ -304,6 +312,7 @@ def check_effects(names) -> tuple[str, ...]:
 
 
 __all__ = [
+    "ABSORBS",
     "BASELINE_PARAMETERS",
     "CONFUSABLE",
     "EXTRA_PARAMETERS",

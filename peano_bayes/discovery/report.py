@@ -12,7 +12,7 @@ import numpy as np
 from .. import plots
 from ..figures import save
 from ..inference.results import write_atomic_text
-from .effects import LIBRARY
+from .effects import ABSORBS, CONFUSABLE, LIBRARY
 
 _UNIT = {"load_cycle": "N", "blocking": "N", "stroke": "-", "step": "-"}
 
@@ -86,6 +86,22 @@ def _fmt(x) -> str:
     return "n/a" if x is None or not np.isfinite(x) else f"{x:.3g}"
 
 
+def _absorbed_notes(final_model) -> list[str]:
+    """A paragraph per effect of the final model that absorbs a library effect the model lacks (:data:`ABSORBS`)."""
+    lines = []
+    for effect in final_model:
+        for other in ABSORBS.get(effect, ()):
+            if other not in final_model:
+                lines += [
+                    f"`{effect}` also stands for `{other}`: on one specimen's rig tests the two act almost as "
+                    f"one element (exactly, for a linear film), so its fitted parameters include any `{other}` "
+                    f"and only a large one would show apart. To separate them: "
+                    f"{CONFUSABLE[frozenset({effect, other})]}.",
+                    "",
+                ]
+    return lines
+
+
 def report_markdown(report: dict) -> str:
     """The report in words a materials engineer reads."""
     lines = [f"# Discovery report: specimen {report['specimen']}", ""]
@@ -123,6 +139,7 @@ def report_markdown(report: dict) -> str:
     if report["noise_model"]:
         lines.append(f"\nThe sensor or noise model needed: {', '.join(report['noise_model'])} (not physics).")
     lines += ["", f"Base model: {' + '.join(report['base'])}. Final model: {' + '.join(report['final_model'])}.", ""]
+    lines += _absorbed_notes(report["final_model"])
     for i, step in enumerate(report["steps"], 1):
         ev = step["evidence"]
         lines += [
