@@ -23,8 +23,10 @@ repeat of each condition instead of the second (``discrepancy-8000/tuning/last_r
 before its final run on 9000-9021 (``discrepancy-9000/PREREGISTRATION.md``). Seeds 9000-9021 were then used again
 to tune letting the sensor's offset and gain compete with physics on held-out gain
 (``discrepancy-9000/tuning/offset_competes/``), adopted before its final run on 10000-10021
-(``discrepancy-10000/PREREGISTRATION.md``): that is the current final run, and the defaults run it. A final run
-of any later workflow change starts at ``--first-seed 11000``. None of these seeds is reused for a final run.
+(``discrepancy-10000/PREREGISTRATION.md``): that is the current final run, and the defaults run it. The same
+workflow was run at SNR 4 on seeds 11000-11021 (``--snr 4``, the eight effects only,
+``discrepancy-11000/PREREGISTRATION.md``). A final run of any later workflow change starts at
+``--first-seed 12000``. None of these seeds is reused for a final run.
 The label never reaches ``discover``.
 
 Resumable: every finished run is one line of ``OUT/runs-<worker>.jsonl``; a rerun skips what is there. Writes
