@@ -385,9 +385,7 @@ def discover(split: SplitData, *, base=DEFAULT_BASE, gates: Gates = Gates(), see
             "meaning": LIBRARY[best.name].meaning,
             "rivals": rivals,
             "close_calls": [r for r in ties if r not in rivals],
-            "experiment": {
-                r: CONFUSABLE.get(frozenset({best.name, r}), "no known discriminating test") for r in rivals
-            },
+            "experiment": {r: CONFUSABLE[frozenset({best.name, r})] for r in rivals},
             "evidence": best.evidence,
             "parameters": {
                 p: {"value": best.fit.params[p], "sd": best.fit.sd.get(p)} for p in LIBRARY[best.name].params
