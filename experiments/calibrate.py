@@ -5,7 +5,7 @@ much narrower than ``PARAMETERS`` bounds) and fitted by least squares so that th
 from **noise-free virtual-rig signals** (``peano_bayes.rig.simulate_dataset``, one specimen, no spread, the
 rig's own protocol; metrics from ``peano_bayes.metrics``) match
 ``data/published_metrics.csv``. Residuals are log-ratios over the tolerance (10 % explicit, 20 % approximate,
-30 % ambiguous); orderings (``data/published_orderings.csv``) are soft hinge residuals on log-ratios with a
+30 % ambiguous); orderings (``peano_bayes/bundled/data/published_orderings.csv``) are soft hinge residuals on log-ratios with a
 5 % margin, active once the other material of a pair has been fitted (materials are fitted in ``FIT_ORDER``);
 a weak prior term keeps each freed parameter near its nominal value. The step response is not required to
 overshoot (a hinge on it cost the 30 kPa fits too much); ``peano_bayes.metrics.step_window`` times a response without
@@ -19,7 +19,8 @@ needs a JAX-differentiable residual, and these metrics are NumPy measurements on
 windows, interpolation), so finite differences are the honest choice.
 
 Run ``python experiments/calibrate.py`` (``--refit [CODE ...]`` ignores the per-material cache in
-``data/calibration_cache/`` for those materials, or all). Writes ``data/true_parameters.toml``.
+``experiments/datasets/calibration_cache/`` for those materials, or all). Writes
+``peano_bayes/bundled/data/true_parameters.toml``.
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ import jax
 import numpy as np
 from scipy.optimize import least_squares
 
+from peano_bayes import bundled  # noqa: E402
 from peano_bayes import metrics as table3  # noqa: E402
 from peano_bayes.metrics import NOISELESS, STIFFNESS, zero_kpa_stiffness  # noqa: E402, F401
 from peano_bayes.physics import DEFAULT_CONFIG, PARAMETERS, ModelConfig  # noqa: E402
@@ -42,8 +44,8 @@ from peano_bayes.rig import RigSimulationError  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 
-DATA = Path(__file__).parent / "data"
-CACHE = DATA / "calibration_cache"
+DATA = bundled.DATA_DIR  # writes true_parameters.toml beside the datasets
+CACHE = Path(__file__).parent / "datasets" / "calibration_cache"
 FIT_ORDER = ("TP", "PR", "P", "TFC", "FC", "PC", "TPC", "PCS")
 #: Warm starts: a material's fit starts from an already fitted, similar material.
 WARM_START = {"P": "TP", "TFC": "TP", "PC": "FC", "TPC": "FC", "PCS": "FC"}
@@ -74,7 +76,7 @@ ORDER_MARGIN = 0.05
 EQUAL_BAND = 0.10
 PRIOR_WEIGHT = 0.05
 
-#: Orderings encoded from data/published_orderings.csv: (metric, a, relation, b), relation ">" or "=".
+#: Orderings encoded from peano_bayes/bundled/data/published_orderings.csv: (metric, a, relation, b), relation ">" or "=".
 ORDERINGS = (
     *[("speed", a, ">", b) for a, b in (("TP", "P"), ("P", "TFC"), ("TFC", "PR"))],
     *[("speed", a, ">", b) for a, b in (("FC", "PCS"), ("PCS", "TPC"), ("TPC", "PC"))],

@@ -17,7 +17,7 @@ import json
 import sys
 from pathlib import Path
 
-from peano_bayes import enable_compilation_cache
+from peano_bayes import bundled, enable_compilation_cache
 from peano_bayes.data import load
 from peano_bayes.discovery import Gates, discover, discovery_data, write_report
 from peano_bayes.discovery.effects import PHYSICS_EFFECTS
@@ -57,7 +57,7 @@ def main(argv=None) -> int:
     out = Path(args.out)
     rows = []
     for code in args.materials:
-        dataset = load(HERE / "data" / f"{code}.csv")
+        dataset = load(bundled.dataset_path(code))
         target = out / code
         if (target / "report.json").exists():
             report = json.loads((target / "report.json").read_text())

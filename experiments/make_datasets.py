@@ -12,11 +12,12 @@ import time
 import tomllib
 from pathlib import Path
 
+from peano_bayes import bundled
 from peano_bayes.data import save
 from peano_bayes.physics import ModelConfig
 from peano_bayes.rig import simulate_dataset
 
-DATA = Path(__file__).parent / "data"
+DATA = bundled.DATA_DIR
 #: One fixed seed per material (Table 4 order), so regenerating gives the same bytes.
 SEEDS = {"TP": 101, "P": 102, "PR": 103, "TPC": 104, "PC": 105, "PCS": 106, "TFC": 107, "FC": 108}
 

@@ -40,6 +40,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.signal import savgol_filter
 
+from . import bundled
 from .errors import PeanoBayesInputError
 from .inference.posterior import STEP_ONLY_PARAMETERS
 from .inference.priors import prior_for
@@ -181,8 +182,6 @@ STIFFNESS = "stiffness_at_minus_1.5pct_0kPa"
 #: Metrics that need the step test (the rest come from load cycles, blocking and stroke).
 STEP_METRICS = ("speed", "power_per_pressure", "efficiency", "overshoot")
 NOISELESS = RigNoise(0.0, 0.0, 0.0, 0.0, 0.0)
-#: Where the bundled copies of the paper's extracted numbers live.
-PUBLISHED_DIR = Path(__file__).resolve().parents[1] / "experiments" / "data"
 
 
 @partial(jax.jit, static_argnames="config")
@@ -320,7 +319,7 @@ def posterior_metrics(
 def published_metrics(material: str, path: str | Path | None = None) -> list[dict]:
     """Rows of ``published_metrics.csv`` for ``material`` whose metric this module predicts: ``metric``,
     ``value`` [SI, :data:`METRIC_UNITS`], ``kind`` (explicit / approximate / ambiguous) and ``source``."""
-    path = Path(path) if path else PUBLISHED_DIR / "published_metrics.csv"
+    path = Path(path) if path else bundled.DATA_DIR / "published_metrics.csv"
     with open(path, newline="") as f:
         return [
             {"metric": r["metric"], "value": float(r["value"]), "kind": r["kind"].split()[0], "source": r["source"]}

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import bundled
 from .data import Dataset, load
 from .errors import PeanoBayesInputError
 from .inference.fit import fit, fit_quality
@@ -35,9 +36,7 @@ from .inference.sample import DEFAULT_MAX_STEPS, sample, walker_count
 #: evaluation (45 ms per walker on one core, see README), so it is opt-in (``tests=ALL_TESTS``).
 DEFAULT_TESTS = ("load_cycle", "blocking", "stroke")
 ALL_TESTS = ("load_cycle", "blocking", "stroke", "step")
-#: Where the bundled datasets live.
-BUNDLED_DIR = Path(__file__).resolve().parents[1] / "experiments" / "data"
-BUNDLED_MATERIALS = ("TP", "P", "PR", "TPC", "PC", "PCS", "TFC", "FC")
+BUNDLED_MATERIALS = bundled.MATERIALS
 HDI_PROB = 0.94
 
 
@@ -405,7 +404,7 @@ def report_results(out_dir: str | Path, materials=BUNDLED_MATERIALS, *, n_draws:
 def _infer_bundled(code: str, out_dir: str, kwargs: dict) -> dict:
     """One material of :func:`run_bundled` (top level, so a spawned worker process can run it)."""
     resume = (Path(out_dir) / code / "sampler_state.npz").exists()
-    return infer(BUNDLED_DIR / f"{code}.csv", out_dir, resume=resume, **kwargs)
+    return infer(bundled.dataset_path(code), out_dir, resume=resume, **kwargs)
 
 
 def _can_continue(summary: dict, directory: Path, max_steps: int) -> bool:

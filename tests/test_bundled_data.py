@@ -1,4 +1,4 @@
-"""The bundled synthetic datasets (experiments/data/*.csv) load, are complete and carry Table 4's conditions."""
+"""The bundled synthetic datasets (peano_bayes/bundled/data/*.csv) load, are complete and carry Table 4's conditions."""
 
 from __future__ import annotations
 
@@ -6,10 +6,11 @@ from pathlib import Path
 
 import pytest
 
+from peano_bayes import bundled
 from peano_bayes.data import load
 from peano_bayes.materials import MATERIALS
 
-DATA = Path(__file__).resolve().parent.parent / "experiments" / "data"
+DATA = bundled.DATA_DIR
 CSV_FILES = sorted(p for p in DATA.glob("*.csv") if not p.name.startswith("published_"))
 
 

@@ -1,4 +1,4 @@
-"""Priors as data: ``priors/*.toml`` --load_prior--> :class:`Prior` (pure JAX log-density, numpy sampling).
+"""Priors as data: ``peano_bayes/bundled/priors/*.toml`` --load_prior--> :class:`Prior` (pure JAX log-density, numpy sampling).
 
 **File format.** A prior file is TOML with three kinds of tables::
 
@@ -61,12 +61,13 @@ import jax.numpy as jnp
 import numpy as np
 from scipy import special
 
+from .. import bundled
 from ..errors import PeanoBayesInputError, did_you_mean
 from ..materials import MATERIALS
 from ..physics.model import PARAMETERS, ModelConfig, Parameter
 
-#: The bundled priors directory (the repository's ``priors/``).
-DEFAULT_PRIORS_DIR = Path(__file__).resolve().parents[2] / "priors"
+#: The bundled priors directory (inside the package).
+DEFAULT_PRIORS_DIR = bundled.PRIORS_DIR
 #: The root prior every other prior file extends.
 DEFAULT_FILE = "default.toml"
 
