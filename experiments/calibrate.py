@@ -5,7 +5,7 @@ much narrower than ``PARAMETERS`` bounds) and fitted by least squares so that th
 from **noise-free virtual-rig signals** (``peano_bayes.rig.simulate_dataset``, one specimen, no spread, the
 rig's own protocol; metrics from ``peano_bayes.metrics``) match
 ``data/published_metrics.csv``. Residuals are log-ratios over the tolerance (10 % explicit, 20 % approximate,
-30 % ambiguous); orderings (``peano_bayes/bundled/data/published_orderings.csv``) are soft hinge residuals on log-ratios with a
+30 % ambiguous); orderings (bundled ``published_orderings.csv``) are soft hinge residuals on log-ratios with a
 5 % margin, active once the other material of a pair has been fitted (materials are fitted in ``FIT_ORDER``);
 a weak prior term keeps each freed parameter near its nominal value. The step response is not required to
 overshoot (a hinge on it cost the 30 kPa fits too much); ``peano_bayes.metrics.step_window`` times a response without
@@ -76,7 +76,7 @@ ORDER_MARGIN = 0.05
 EQUAL_BAND = 0.10
 PRIOR_WEIGHT = 0.05
 
-#: Orderings encoded from peano_bayes/bundled/data/published_orderings.csv: (metric, a, relation, b), relation ">" or "=".
+#: Orderings encoded from the bundled published_orderings.csv: (metric, a, relation, b), relation ">" or "=".
 ORDERINGS = (
     *[("speed", a, ">", b) for a, b in (("TP", "P"), ("P", "TFC"), ("TFC", "PR"))],
     *[("speed", a, ">", b) for a, b in (("FC", "PCS"), ("PCS", "TPC"), ("TPC", "PC"))],

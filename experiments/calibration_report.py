@@ -1,8 +1,8 @@
 """Check the bundled datasets against the paper: measure Table 3 metrics from the files, write CALIBRATION.md.
 
-Loads every ``data/<CODE>.csv`` with ``peano_bayes.data.load``, measures each metric from the loaded signals
+Loads every bundled ``<CODE>.csv`` with ``peano_bayes.data.load``, measures each metric from the loaded signals
 (``peano_bayes.metrics``: Table 3 definitions, mean over specimens and repeats) and compares it with every row of
-``peano_bayes/bundled/data/published_metrics.csv`` and ``published_orderings.csv`` (copies of the paper's extracted numbers).
+the bundled ``published_metrics.csv`` and ``published_orderings.csv`` (copies of the paper's extracted numbers).
 Tolerances: +-10 % explicit, +-20 % approximate, +-30 % ambiguous; "about equal" means within +-10 % (|log ratio|
 <= 0.1). Run ``python experiments/calibration_report.py``; writes ``experiments/datasets/CALIBRATION.md``.
 """

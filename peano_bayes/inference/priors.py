@@ -1,4 +1,4 @@
-"""Priors as data: ``peano_bayes/bundled/priors/*.toml`` --load_prior--> :class:`Prior` (pure JAX log-density, numpy sampling).
+"""Priors as data: the bundled ``priors/*.toml`` --load_prior--> :class:`Prior` (JAX log-density, numpy sampling).
 
 **File format.** A prior file is TOML with three kinds of tables::
 
