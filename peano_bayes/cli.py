@@ -11,7 +11,7 @@ import json
 import sys
 from collections.abc import Callable
 
-from .errors import PeanoBayesInputError
+from .errors import PeanoBayesError, PeanoBayesInputError
 
 #: name -> (help, run(args) -> dict | None); ``run.arguments(parser)``, if set, adds the options.
 COMMANDS: dict[str, tuple[str, Callable]] = {}
@@ -59,6 +59,9 @@ def main(argv: list[str] | None = None) -> int:
     except PeanoBayesInputError as err:
         print(f"peano-bayes {args.command}: error: {err}", file=sys.stderr)
         return 2
+    except PeanoBayesError as err:  # not the user's input: a failure of the computation
+        print(f"peano-bayes {args.command}: failed: {err}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print(f"peano-bayes {args.command}: interrupted", file=sys.stderr)
         return 130

@@ -1,4 +1,10 @@
-"""Errors a user can cause. The command line turns every one into a one-line message and exit status 2."""
+"""The package's errors, in one place.
+
+:class:`PeanoBayesInputError` is input a user can correct (a file, a specification, an argument): the command line
+turns it into a one-line message and exit status 2. :class:`PeanoBayesError` is the root of every error the package
+raises on purpose; one that is not an input error (such as the virtual rig's solver failing for some parameters)
+becomes a one-line message and exit status 1.
+"""
 
 from __future__ import annotations
 
@@ -14,7 +20,11 @@ def did_you_mean(word: str, choices: Iterable[str], *, brackets: bool = False, c
     return f" (did you mean [{near[0]}]?)" if brackets else f" (did you mean {near[0]!r}?)"
 
 
-class PeanoBayesInputError(ValueError):
+class PeanoBayesError(Exception):
+    """Root of the errors peano_bayes raises on purpose."""
+
+
+class PeanoBayesInputError(PeanoBayesError, ValueError):
     """Bad input: a file, a specification or an argument that cannot be used as given.
 
     The message names what was wrong, where, the value seen and what was expected.

@@ -36,7 +36,7 @@ from . import materials
 from .data import Dataset, Run
 from .data.dataset import OPTIONAL_SIGNALS
 from .data.format import TESTS
-from .errors import PeanoBayesInputError, did_you_mean
+from .errors import PeanoBayesError, PeanoBayesInputError, did_you_mean
 from .materials import GEOMETRY, MaterialSpec
 from .physics import (
     DEFAULT_CONFIG,
@@ -314,8 +314,9 @@ MAX_POSITION_ERROR_M = 1e-6
 MAX_FORCE_ERROR_N = 1e-2
 
 
-class RigSimulationError(PeanoBayesInputError):
-    """The physics gave non-finite signals or did not converge for the given parameters."""
+class RigSimulationError(PeanoBayesError, RuntimeError):
+    """The physics gave non-finite signals or did not converge for the given parameters (not an input error:
+    the parameters may be valid and the solver's tolerance out of reach for them)."""
 
 
 @partial(jax.jit, static_argnames="config")
