@@ -1,59 +1,52 @@
 """peano_bayes: Bayesian material-property inference workbench for Peano fluidic muscles.
 
-Importing the package enables float64 in JAX (the physics spans coefficients from 1e-9 to 1e15).
+Importing ``peano_bayes`` alone is light (no JAX): the physics names below load on first use. Any part of the
+package that computes with JAX switches JAX to 64-bit floats when imported (see :mod:`peano_bayes.jax_config`,
+the one place the package changes JAX's global configuration, and why it must).
 """
 
-import os
-from pathlib import Path
+from __future__ import annotations
 
-import jax
+import importlib
 
-jax.config.update("jax_enable_x64", True)
+__version__ = "0.2.0"
+
+#: Public name -> module it lives in (loaded on first access, so ``import peano_bayes`` does not import JAX).
+_LAZY = {
+    **{
+        name: "peano_bayes.physics"
+        for name in (
+            "DEFAULT_CONFIG",
+            "PAPER_GEOMETRY",
+            "PAPER_PROPOSED_CONFIG",
+            "PARAMETERS",
+            "Blocking",
+            "Geometry",
+            "LoadCycle",
+            "ModelConfig",
+            "Step",
+            "Stroke",
+            "simulate_blocking",
+            "simulate_load_cycle",
+            "simulate_step",
+            "simulate_stroke",
+            "static_force",
+            "static_strain",
+        )
+    },
+    "enable_compilation_cache": "peano_bayes.jax_config",
+}
+
+__all__ = ["__version__", *_LAZY]
 
 
-def enable_compilation_cache(directory: str | os.PathLike | None = None) -> Path:
-    """Keep JAX's compiled programs on disk (default ``$PEANO_BAYES_CACHE`` or ``~/.cache/peano_bayes/jax``), so
-    a second run of a command skips most of the compilation (minutes for the discovery model). The command
-    line and the experiments call this; a library user opts in."""
-    directory = Path(directory or os.environ.get("PEANO_BAYES_CACHE") or Path.home() / ".cache" / "peano_bayes" / "jax")
-    directory.mkdir(parents=True, exist_ok=True)
-    jax.config.update("jax_compilation_cache_dir", str(directory))
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
-    return directory
+def __getattr__(name: str):
+    if name in _LAZY:
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'peano_bayes' has no attribute {name!r}")
 
 
-from .physics import (  # noqa: E402
-    DEFAULT_CONFIG,
-    PAPER_GEOMETRY,
-    PAPER_PROPOSED_CONFIG,
-    Blocking,
-    Geometry,
-    LoadCycle,
-    ModelConfig,
-    Step,
-    Stroke,
-    simulate_blocking,
-    simulate_load_cycle,
-    simulate_step,
-    simulate_stroke,
-    static_strain,
-)
-
-__version__ = "0.1.0"
-__all__ = [
-    "DEFAULT_CONFIG",
-    "enable_compilation_cache",
-    "PAPER_GEOMETRY",
-    "PAPER_PROPOSED_CONFIG",
-    "Blocking",
-    "Geometry",
-    "LoadCycle",
-    "ModelConfig",
-    "Step",
-    "Stroke",
-    "simulate_blocking",
-    "simulate_load_cycle",
-    "simulate_step",
-    "simulate_stroke",
-    "static_strain",
-]
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))

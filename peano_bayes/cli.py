@@ -1,73 +1,110 @@
-"""Command line: ``peano-bayes <command>``. Thin over the Python API; see ``peano-bayes --help``.
+"""Command line: ``peano-bayes <command>``. It parses, calls one documented function and prints.
 
-Every subcommand registers itself in ``COMMANDS``. Bad input (any :class:`PeanoBayesInputError`) becomes a
-one-line message on stderr and exit status 2, never a traceback.
+Exit status: 0 success; 1 a computation failed (for example the virtual rig's solver); 2 bad input (a one-line
+message naming what, where and what was expected; no traceback, nothing half-written); 3 a fit or run finished
+but did not converge (its results are written and marked unconverged); 130 interrupted (Ctrl-C).
+
+``--json`` makes standard output carry only one JSON object; everything else (messages, progress) goes to
+standard error. ``--quiet`` keeps only warnings and errors; ``--verbose`` adds tracebacks of failed computations.
+``--help`` and ``--version`` do not import JAX. The compiled programs are cached on disk
+(``$PEANO_BAYES_CACHE``, default ``~/.cache/peano_bayes/jax``), so a second run skips most compilation.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import os
 import sys
-from collections.abc import Callable
+import traceback
+from pathlib import Path
 
+from . import __version__
+from .commands import COMMANDS
 from .errors import PeanoBayesError, PeanoBayesInputError
 
-#: name -> (help, run(args) -> dict | None); ``run.arguments(parser)``, if set, adds the options.
-COMMANDS: dict[str, tuple[str, Callable]] = {}
+#: Exit status of each outcome (documented in the module docstring and ``--help``).
+EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_UNCONVERGED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+
+_EPILOG = (
+    "exit status: 0 success, 1 a computation failed, 2 bad input, 3 finished but not converged, "
+    "130 interrupted. 'peano-bayes COMMAND --help' shows a command's options."
+)
 
 
-def command(name: str, help: str):
-    """Register ``run(args)`` as subcommand ``name``; set ``run.arguments = fn(parser)`` to add its options."""
-
-    def decorate(run):
-        COMMANDS[name] = (help, run)
-        return run
-
-    return decorate
-
-
-def _build_parser() -> argparse.ArgumentParser:
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of every registered command (imports no JAX)."""
     parser = argparse.ArgumentParser(
         prog="peano-bayes",
         description="Bayesian material-property inference workbench for Peano fluidic muscles.",
+        epilog=_EPILOG,
     )
+    parser.add_argument("--version", action="version", version=f"peano-bayes {__version__}")
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--json", action="store_true", help="print only one JSON object on stdout (the rest: stderr)")
+    talk = common.add_mutually_exclusive_group()
+    talk.add_argument("-q", "--quiet", action="store_true", help="print only warnings and errors")
+    talk.add_argument("-v", "--verbose", action="store_true", help="also print tracebacks of failed computations")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for name, (help_text, run) in COMMANDS.items():
-        p = sub.add_parser(name, help=help_text, description=help_text)
-        p.add_argument("--json", action="store_true", help="print one JSON object on stdout as the last line")
-        getattr(run, "arguments", lambda parser: None)(p)
+    for name, command in COMMANDS.items():
+        p = sub.add_parser(name, parents=[common], help=command.help, description=command.help, epilog=_EPILOG)
+        command.arguments(p)
     return parser
 
 
+def _use_compilation_cache() -> None:
+    """Point JAX's persistent compilation cache at ``$PEANO_BAYES_CACHE`` (or ``~/.cache/peano_bayes/jax``)
+    without importing JAX: JAX reads these variables when it is first imported, if it ever is."""
+    directory = os.environ.get("PEANO_BAYES_CACHE") or str(Path.home() / ".cache" / "peano_bayes" / "jax")
+    if "jax" in sys.modules:  # already imported (a caller's process): configure it directly
+        from .jax_config import enable_compilation_cache
+
+        with contextlib.suppress(OSError):  # an unwritable home: compile every time
+            enable_compilation_cache(directory)
+        return
+    with contextlib.suppress(OSError):
+        Path(directory).mkdir(parents=True, exist_ok=True)
+        os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", directory)
+        os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "1")
+
+
 def main(argv: list[str] | None = None) -> int:
-    from . import (
-        commands,  # noqa: F401  (registers the subcommands)
-        enable_compilation_cache,
-    )
-
-    try:
-        enable_compilation_cache()
-    except OSError:  # an unwritable home: compile every time
-        pass
-
-    parser = _build_parser()
+    """Run ``peano-bayes`` with ``argv`` (default: ``sys.argv[1:]``); return the exit status."""
+    parser = build_parser()
     args = parser.parse_args(argv)
-    _, run = COMMANDS[args.command]
+    command = COMMANDS[args.command]
+    if args.quiet and hasattr(args, "no_progress"):
+        args.no_progress = True
+    _use_compilation_cache()
+    say = f"peano-bayes {args.command}"
+    # Human output goes to stdout, or to stderr under --json (stdout then holds the JSON object alone), or
+    # nowhere under --quiet; warnings and errors always go to stderr.
+    human = sys.stderr if args.json else (open(os.devnull, "w") if args.quiet else sys.stdout)  # noqa: SIM115
     try:
-        result = run(args)
+        with contextlib.redirect_stdout(human):
+            result = command.run(args)
     except PeanoBayesInputError as err:
-        print(f"peano-bayes {args.command}: error: {err}", file=sys.stderr)
-        return 2
+        print(f"{say}: error: {err}", file=sys.stderr)
+        return EXIT_BAD_INPUT
     except PeanoBayesError as err:  # not the user's input: a failure of the computation
-        print(f"peano-bayes {args.command}: failed: {err}", file=sys.stderr)
-        return 1
+        if args.verbose:
+            traceback.print_exc()
+        print(f"{say}: failed: {err}", file=sys.stderr)
+        return EXIT_FAILED
     except KeyboardInterrupt:
-        print(f"peano-bayes {args.command}: interrupted", file=sys.stderr)
-        return 130
+        print(f"{say}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    finally:
+        if human not in (sys.stdout, sys.stderr):
+            human.close()
+    result = {} if result is None else result
     if args.json:
-        print(json.dumps(result if result is not None else {}, default=float))
-    return 0
+        print(json.dumps(result, default=float))
+    if result.get("converged") is False:
+        print(f"{say}: WARNING: not converged (exit status {EXIT_UNCONVERGED})", file=sys.stderr)
+        return EXIT_UNCONVERGED
+    return EXIT_OK
 
 
 if __name__ == "__main__":

@@ -1,11 +1,60 @@
-"""The subcommands of ``peano-bayes``; each is a thin wrapper over the documented Python API."""
+"""The subcommands of ``peano-bayes``, each a thin wrapper over one documented function of the Python API.
+
+Every subcommand registers itself in :data:`COMMANDS` with :func:`command`; its ``arguments(parser)`` adds its
+options and must not import JAX (so ``--help`` stays instant): heavy imports happen inside ``run(args)``.
+``run`` returns a JSON-ready dict (printed under ``--json``); a dict whose ``converged`` is ``False`` makes the
+command exit with status 3.
+"""
 
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
-from .cli import command
+from . import bundled
+from .defaults import (
+    ALL_TESTS,
+    DEFAULT_CHUNK,
+    DEFAULT_MAX_STEPS,
+    DEFAULT_STARTS,
+    DEFAULT_TESTS,
+    DEFAULT_WARMUP,
+)
+from .errors import PeanoBayesInputError
+
+
+@dataclass(frozen=True)
+class Command:
+    """One subcommand: its one-line ``help`` and ``run(args) -> dict | None``; ``run.arguments(parser)``, if
+    set, adds its options."""
+
+    help: str
+    run: Callable
+
+    def arguments(self, parser) -> None:
+        getattr(self.run, "arguments", lambda parser: None)(parser)
+
+
+#: name -> :class:`Command`, in the order ``--help`` lists them.
+COMMANDS: dict[str, Command] = {}
+
+
+def command(name: str, help: str):
+    """Register ``run(args)`` as subcommand ``name``; set ``run.arguments = fn(parser)`` to add its options."""
+
+    def decorate(run):
+        COMMANDS[name] = Command(help, run)
+        return run
+
+    return decorate
+
+
+_DATA_HELP = (
+    "the dataset: a CSV with its TOML sidecar (or its stem), or a bundled material code "
+    f"({' '.join(bundled.MATERIALS)})"
+)
 
 
 @command("demo", "forward-model demo: blocking force and free strain of the default four-tube muscle")
@@ -34,7 +83,7 @@ demo.arguments = lambda p: p.add_argument(
 def check(args):
     from .data import load
 
-    dataset = load(args.data)
+    dataset = load(bundled.resolve_dataset(args.data))
     g, c, m = dataset.geometry, dataset.conditions, dataset.material
     tests = {}
     for test in dataset.tests:
@@ -85,13 +134,12 @@ def check(args):
     }
 
 
-check.arguments = lambda p: p.add_argument("data", metavar="DATA.csv", help="the dataset CSV (or its stem)")
+check.arguments = lambda p: p.add_argument("data", metavar="DATA", help=_DATA_HELP)
 
 
 @command("simulate", "the virtual rig: write a dataset (CSV + TOML sidecar) simulated from given parameters")
 def simulate(args):
     from .data import dataset_paths, save
-    from .errors import PeanoBayesInputError
     from .rig import read_parameter_file, simulate_dataset
 
     params, config = read_parameter_file(args.params) if args.params else ({}, None)
@@ -135,8 +183,6 @@ def simulate(args):
 
 
 def _simulate_arguments(p):
-    from .rig import QUIRKS
-
     p.add_argument("--material", required=True, metavar="CODE", help="Table 4 material code: TP P PR TPC PC PCS TFC FC")
     p.add_argument(
         "--params",
@@ -151,7 +197,7 @@ def _simulate_arguments(p):
         nargs="+",
         default=[],
         metavar="NAME",
-        help=f"switch on an effect (repeatable): {', '.join(QUIRKS)}",
+        help="switch on an effect by its name in the effect registry (repeatable; an unknown name lists them)",
     )
     p.add_argument("--drift", action="store_true", help="add a slow linear drift to the force sensor")
     p.add_argument("--specimens", type=int, default=2, help="specimens per material (default: 2, as in the paper)")
@@ -162,8 +208,6 @@ simulate.arguments = _simulate_arguments
 
 
 def _sampling_arguments(p):
-    from .pipeline import ALL_TESTS, DEFAULT_MAX_STEPS, DEFAULT_TESTS
-
     p.add_argument("--seed", type=int, default=0, help="seed of the starts and the sampler (default: 0)")
     p.add_argument(
         "--tests",
@@ -173,9 +217,16 @@ def _sampling_arguments(p):
         metavar="TEST",
         help=f"tests to fit (default: {' '.join(DEFAULT_TESTS)}; the step response is ~20x dearer)",
     )
-    p.add_argument("--starts", type=int, default=16, help="least-squares starts (default: 16)")
+    p.add_argument(
+        "--starts", type=int, default=DEFAULT_STARTS, help=f"least-squares starts (default: {DEFAULT_STARTS})"
+    )
     p.add_argument("--walkers", type=int, default=None, help="emcee walkers (default: max(32, 2 x parameters + 2))")
-    p.add_argument("--chunk", type=int, default=500, help="steps between saved states and checks (default: 500)")
+    p.add_argument(
+        "--chunk",
+        type=int,
+        default=DEFAULT_CHUNK,
+        help=f"steps between saved states and checks (default: {DEFAULT_CHUNK})",
+    )
     p.add_argument(
         "--max-steps",
         type=int,
@@ -184,19 +235,20 @@ def _sampling_arguments(p):
         "so --resume with a larger limit continues it",
     )
     p.add_argument(
-        "--warmup", type=int, default=300, help="warm-up steps, discarded, that fit the proposal (default: 300)"
+        "--warmup",
+        type=int,
+        default=DEFAULT_WARMUP,
+        help=f"warm-up steps, discarded, that fit the proposal (default: {DEFAULT_WARMUP})",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.add_argument(
         "--sample-all",
         action="store_true",
-        help="also sample the shape constants held at nominal by default (slow mixing; see README)",
+        help="also sample the shape constants held at nominal by default (slow mixing; see docs/inference.md)",
     )
 
 
 def _check_sampling(args):
-    from .errors import PeanoBayesInputError
-
     for name in ("starts", "chunk", "max_steps"):
         if getattr(args, name) < 1:
             raise PeanoBayesInputError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
@@ -221,6 +273,7 @@ def _report(summary: dict) -> dict:
     conv = summary["convergence"]
     return {
         "material": summary["material"],
+        "label": summary.get("label", summary["material"]),
         "converged": conv["converged"],
         "problems": conv["problems"],
         "steps": summary["steps"],
@@ -230,23 +283,42 @@ def _report(summary: dict) -> dict:
     }
 
 
-@command("fit", "one dataset: multi-start least squares, then MCMC (emcee), into --out DIR/<code>/ (resumable)")
+@command("fit", "one dataset: multi-start least squares, then MCMC (emcee), into --out DIR/LABEL/ (resumable)")
 def fit_command(args):
+    import sys
+
     from .data import load
     from .pipeline import infer
 
     options = _check_sampling(args)
-    dataset = load(args.data)  # validate before anything is written
-    summary = infer(dataset, args.out, resume=args.resume, **options)
+    dataset = load(bundled.resolve_dataset(args.data))  # validate before anything is written
+    summary = infer(dataset, args.out, resume=args.resume, prior=args.prior, label=args.label, **options)
     report = _report(summary)
-    if not report["converged"]:
-        print(f"peano-bayes fit: WARNING: {summary['material']} did NOT converge: {'; '.join(report['problems'])}")
+    out = Path(args.out) / report["label"]
+    if report["converged"]:
+        print(f"wrote {out}: converged after {report['steps']} steps")
+    else:
+        print(
+            f"peano-bayes fit: WARNING: {report['label']} did NOT converge: {'; '.join(report['problems'])}; "
+            f"results in {out} are marked unconverged (--resume with a larger --max-steps continues)",
+            file=sys.stderr,
+        )
     return report
 
 
 def _fit_arguments(p):
-    p.add_argument("data", metavar="DATA.csv", help="the dataset CSV (with its TOML sidecar)")
-    p.add_argument("--out", required=True, metavar="DIR", help="output directory (results go to DIR/<code>/)")
+    p.add_argument("data", metavar="DATA", help=_DATA_HELP)
+    p.add_argument("--out", required=True, metavar="DIR", help="output directory (results go to DIR/LABEL/)")
+    p.add_argument(
+        "--prior",
+        metavar="FILE.toml",
+        default=None,
+        help="prior file (may 'extends' a bundled one; 'peano-bayes prior new' writes a start); "
+        "default: the bundled prior of the sidecar's material code",
+    )
+    p.add_argument(
+        "--label", metavar="NAME", default=None, help="name of the result folder (default: the data file's stem)"
+    )
     p.add_argument("--resume", action="store_true", help="continue an interrupted run from its saved state")
     _sampling_arguments(p)
 
@@ -256,33 +328,29 @@ fit_command.arguments = _fit_arguments
 
 @command("run", "the main job: every bundled material, fit + sample into results/ with results/index.md")
 def run(args):
-    from .pipeline import BUNDLED_MATERIALS, run_bundled
+    import sys
+
+    from .pipeline import run_bundled
 
     options = _check_sampling(args)
     materials = tuple(args.materials)
-    unknown = [m for m in materials if m not in BUNDLED_MATERIALS]
+    unknown = [m for m in materials if m not in bundled.MATERIALS]
     if unknown:
-        from .errors import PeanoBayesInputError
-
-        raise PeanoBayesInputError(f"unknown material(s) {', '.join(unknown)}; bundled: {' '.join(BUNDLED_MATERIALS)}")
+        raise PeanoBayesInputError(f"unknown material(s) {', '.join(unknown)}; bundled: {' '.join(bundled.MATERIALS)}")
     if args.jobs < 1:
-        from .errors import PeanoBayesInputError
-
         raise PeanoBayesInputError(f"--jobs must be >= 1, got {args.jobs}")
     summaries = run_bundled(args.out, materials=materials, jobs=args.jobs, **options)
     reports = [_report(s) for s in summaries]
     bad = [r["material"] for r in reports if not r["converged"]]
     print(f"wrote {args.out}/index.md: {len(reports) - len(bad)} of {len(reports)} materials converged")
     if bad:
-        print(f"peano-bayes run: WARNING: NOT CONVERGED: {', '.join(bad)} (see {args.out}/index.md)")
+        print(f"peano-bayes run: WARNING: NOT CONVERGED: {', '.join(bad)} (see {args.out}/index.md)", file=sys.stderr)
     return {"materials": reports, "converged": not bad}
 
 
 def _run_arguments(p):
-    from .pipeline import BUNDLED_MATERIALS
-
     p.add_argument("--out", default="results", metavar="DIR", help="output directory (default: results)")
-    p.add_argument("--materials", nargs="+", default=list(BUNDLED_MATERIALS), metavar="CODE", help="subset to run")
+    p.add_argument("--materials", nargs="+", default=list(bundled.MATERIALS), metavar="CODE", help="subset to run")
     p.add_argument("--jobs", type=int, default=2, help="materials run at once, one process each (default: 2)")
     _sampling_arguments(p)
 
@@ -290,9 +358,41 @@ def _run_arguments(p):
 run.arguments = _run_arguments
 
 
+@command("prior", "priors: 'prior new --like CODE --out FILE.toml' writes a starting prior to edit")
+def prior_command(args):
+    from .inference.priors import load_prior, starting_prior
+    from .inference.results import write_atomic_text
+
+    out = Path(args.out)
+    if out.suffix != ".toml":
+        raise PeanoBayesInputError(f"--out {out}: expected a path ending in .toml")
+    if out.exists() and not args.force:
+        raise PeanoBayesInputError(f"--out {out}: the file exists; choose another path or pass --force")
+    if not out.parent.is_dir():
+        raise PeanoBayesInputError(f"--out {out}: the folder {out.parent} does not exist")
+    material = args.material or out.stem
+    text = starting_prior(args.like, material=material)
+    write_atomic_text(out, text)
+    prior = load_prior(out)  # the written file loads as it will in a fit
+    print(f"wrote {out}: the prior of {args.like} ({len(prior.names)} parameters) for material {material}; edit it, "
+          f"then: peano-bayes fit DATA.csv --prior {out}")
+    return {"prior": str(out), "like": args.like, "material": material, "parameters": list(prior.names)}
+
+
+def _prior_arguments(p):
+    sub = p.add_subparsers(dest="action", required=True, metavar="ACTION")
+    new = sub.add_parser("new", help="write a starting prior that extends a bundled material's prior")
+    new.add_argument("--like", required=True, metavar="CODE", help=f"start from: {' '.join(bundled.MATERIALS)}")
+    new.add_argument("--out", required=True, metavar="FILE.toml", help="the prior file to write")
+    new.add_argument("--material", default=None, metavar="CODE", help="meta.material (default: the file's stem)")
+    new.add_argument("--force", action="store_true", help="overwrite an existing file")
+
+
+prior_command.arguments = _prior_arguments
+
+
 @command("metrics", "posterior of the paper's Table 3 metrics for one result, beside the published values")
 def metrics_command(args):
-    from .errors import PeanoBayesInputError
     from .metrics import evaluate_result, metrics_markdown
 
     if args.draws < 2:
@@ -327,8 +427,6 @@ def rank_command(args):
     codes = [m["material"] for m in metrics]
     twice = sorted({c for c in codes if codes.count(c) > 1})
     if twice:
-        from .errors import PeanoBayesInputError
-
         raise PeanoBayesInputError(f"material(s) given more than once: {', '.join(twice)}")
     prior_only = {name for m in metrics for name, s in m.get("summary", {}).items() if s.get("from_prior")}
     report = rank_materials({m["material"]: m["draws"] for m in metrics}, from_prior=prior_only)
@@ -390,14 +488,14 @@ def discover_command(args):
     from .data import load
     from .discovery import DEFAULT_BASE, Gates, discover, discovery_data, write_report
     from .discovery.effects import check_effects
-    from .errors import PeanoBayesInputError
-
     base = check_effects(args.base.split(",")) if args.base else DEFAULT_BASE
     if args.max_effects < 1:
         raise PeanoBayesInputError(f"--max-effects must be >= 1, got {args.max_effects}")
-    dataset = load(args.data)  # validate before anything is written
+    dataset = load(bundled.resolve_dataset(args.data))  # validate before anything is written
     split = discovery_data(dataset, specimen=args.specimen, tests=args.tests)
-    say = (lambda line: None) if args.json else (lambda line: print(line, flush=True))
+    def say(line):
+        print(line, flush=True)
+
     say(f"{len(split.fit_runs)} fitted and {len(split.held_out_runs)} held-out runs of specimen {split.specimen} "
         "(the first fit compiles the model: a few minutes)")
     gates = Gates(max_effects=args.max_effects)
@@ -412,7 +510,7 @@ def discover_command(args):
 
 
 def _discover_arguments(p):
-    p.add_argument("data", metavar="DATA.csv", help="the dataset CSV (with its TOML sidecar)")
+    p.add_argument("data", metavar="DATA", help=_DATA_HELP)
     p.add_argument("--out", required=True, metavar="DIR", help="output directory for report.json, report.md, figures/")
     p.add_argument(
         "--base",

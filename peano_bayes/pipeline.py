@@ -18,26 +18,30 @@ import numpy as np
 
 from . import bundled
 from .data import Dataset, load
+from .defaults import (
+    ALL_TESTS,
+    DEFAULT_CHUNK,
+    DEFAULT_MAX_STEPS,
+    DEFAULT_STARTS,
+    DEFAULT_TESTS,
+    DEFAULT_WARMUP,
+    HDI_PROB,
+)
 from .errors import PeanoBayesInputError
 from .inference.fit import fit, fit_quality
 from .inference.laplace import posterior_mode
 from .inference.likelihood import prepare
 from .inference.posterior import CONTRAST_PREFIX, DEFAULT_HELD, SPECIMEN_SD, build_posterior
-from .inference.priors import prior_for
+from .inference.priors import load_prior, prior_for
 from .inference.results import (
     parameter_table,
     to_inference_data,
     write_atomic_text,
     write_netcdf,
 )
-from .inference.sample import DEFAULT_MAX_STEPS, sample, walker_count
+from .inference.sample import sample, walker_count
 
-#: Tests fitted by default. The step response costs ~20x the three quasi-static tests together per
-#: evaluation (45 ms per walker on one core, see README), so it is opt-in (``tests=ALL_TESTS``).
-DEFAULT_TESTS = ("load_cycle", "blocking", "stroke")
-ALL_TESTS = ("load_cycle", "blocking", "stroke", "step")
 BUNDLED_MATERIALS = bundled.MATERIALS
-HDI_PROB = 0.94
 
 
 def _select_tests(dataset: Dataset, tests) -> Dataset:
@@ -53,7 +57,34 @@ def _select_tests(dataset: Dataset, tests) -> Dataset:
     return dataclasses.replace(dataset, runs=runs)
 
 
-def least_squares(posterior, prior, *, n_starts: int = 16, seed: int = 0) -> dict:
+def _prior_of(dataset: Dataset, prior: str | Path | None):
+    """The prior of a fit: ``prior`` (file or code) if given, else the bundled prior of the material code."""
+    if prior is not None:
+        as_path = Path(prior)
+        return load_prior(as_path.resolve() if as_path.is_file() else prior).for_config()
+    code = dataset.material.code
+    try:
+        return prior_for(code)
+    except PeanoBayesInputError as err:
+        raise PeanoBayesInputError(
+            f"{dataset.source_path}: {err}. Give this dataset a prior file with --prior FILE.toml (Python: "
+            f"prior=...); 'peano-bayes prior new --like TPC --out {code}.toml' writes one to edit"
+        ) from None
+
+
+def _default_label(dataset: Dataset) -> str:
+    return Path(dataset.source_path).stem if dataset.source_path else dataset.material.code
+
+
+def _check_label(label: str) -> str:
+    if not label or label in (".", "..") or any(c in label for c in '/\\:*?"<>|') or label != label.strip():
+        raise PeanoBayesInputError(
+            f"--label {label!r}: expected a folder name (letters, digits, '-', '_', '.'; no path separators)"
+        )
+    return label
+
+
+def least_squares(posterior, prior, *, n_starts: int = DEFAULT_STARTS, seed: int = 0) -> dict:
     """Multi-start least squares over the model parameters ``posterior`` samples (``prior``: the full prior
     they come from), the rest held as in ``posterior``; a JSON-ready dict of the result."""
     config = posterior.config
@@ -114,18 +145,23 @@ def infer(
     seed: int = 0,
     resume: bool = False,
     tests=DEFAULT_TESTS,
-    n_starts: int = 16,
+    n_starts: int = DEFAULT_STARTS,
     n_walkers: int | None = None,
-    chunk: int = 500,
+    chunk: int = DEFAULT_CHUNK,
     max_steps: int = DEFAULT_MAX_STEPS,
-    warmup: int = 300,
+    warmup: int = DEFAULT_WARMUP,
     progress: bool = True,
     sample_all: bool = False,
+    prior: str | Path | None = None,
+    label: str | None = None,
     log=print,
 ) -> dict:
-    """Fit, sample and write the results of one dataset into ``out_dir/<code>/``; return the summary.
+    """Fit, sample and write the results of one dataset into ``out_dir/<label>/``; return the summary.
 
-    ``data``: a rig file (CSV with its TOML sidecar) or a :class:`Dataset`. ``tests``: which tests to fit
+    ``data``: a rig file (CSV with its TOML sidecar) or a :class:`Dataset`. ``prior``: a prior file (which may
+    ``extends`` a bundled one) or a material code; default: the bundled prior of the dataset's material code.
+    ``label``: the result folder's name; default: the data file's stem (``TP`` for the bundled ``TP.csv``), so
+    two datasets of one material do not overwrite each other. ``tests``: which tests to fit
     (default :data:`DEFAULT_TESTS`). The least-squares point is polished to the posterior mode
     (:func:`~peano_bayes.inference.laplace.posterior_mode`); sampling runs ``warmup`` steps of warm-up, then
     chunks of ``chunk`` steps until converged or ``max_steps`` (see
@@ -137,9 +173,9 @@ def infer(
     dataset = load(data) if not isinstance(data, Dataset) else data
     dataset = _select_tests(dataset, tests)
     code = dataset.material.code
-    prior = prior_for(code)
+    prior = _prior_of(dataset, prior)
     config = prior.config
-    out = Path(out_dir) / code
+    out = Path(out_dir) / _check_label(label or _default_label(dataset))
     out.mkdir(parents=True, exist_ok=True)
     observations = prepare(dataset)
     posterior = build_posterior(observations, prior, config=config, held=() if sample_all else DEFAULT_HELD)
@@ -202,14 +238,19 @@ def infer(
     if not conv.converged:
         log(f"{code}: WARNING: NOT CONVERGED after {result.chain.shape[0]} steps: {'; '.join(conv.problems)}")
     idata = to_inference_data(
-        posterior, result, seed=seed, attrs={"material": code, "dataset": str(dataset.source_path)}
+        posterior,
+        result,
+        seed=seed,
+        attrs={"material": code, "dataset": str(dataset.source_path), "prior": str(prior.label)},
     )
     # Fit quality at the posterior mean in theta (unconstrained) space, specimen offsets included.
     theta_mean = result.kept().reshape(-1, posterior.ndim).mean(axis=0)
     quality = fit_quality(posterior.params(theta_mean), observations, config)
     summary = {
         "material": code,
+        "label": out.name,
         "dataset": str(dataset.source_path),
+        "prior": str(prior.label),
         "tests": list(dataset.tests),
         "seed": seed,
         "n_walkers": n_walkers,

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from hypothesis import settings
 
-import peano_bayes  # noqa: F401  (enables jax_enable_x64)
+import peano_bayes.jax_config  # noqa: F401  (float64 for every test)
 
 # Fixed examples: the same cases on every machine and every run (no example database needed).
 settings.register_profile("deterministic", derandomize=True, database=None)

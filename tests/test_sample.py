@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
+from peano_bayes.errors import PeanoBayesInputError
 from peano_bayes.inference.sample import (
     TARGETS,
     IndependenceProposal,
@@ -150,7 +151,7 @@ def test_resume_refuses_a_state_of_another_run(tmp_path):
     g = Gaussian()
     kw = dict(n_walkers=8, chunk=20, state_path=tmp_path / "state.npz", progress=False, log=lambda m: None)
     sample(g, g.mean, 0.05 * np.eye(3), seed=1, max_steps=20, **kw)
-    with pytest.raises(ValueError, match="another run"):
+    with pytest.raises(PeanoBayesInputError, match="another run"):
         sample(g, g.mean, 0.05 * np.eye(3), seed=2, max_steps=40, resume=True, **kw)
 
 
@@ -161,6 +162,16 @@ def test_convergence_flags_a_stuck_chain():
     conv = convergence(chain, ("x", "y"))
     assert not conv.converged
     assert any("R-hat" in p for p in conv.problems)
+
+
+def test_convergence_of_a_chain_with_a_walker_that_never_moved_is_a_verdict_not_an_error():
+    rng = np.random.default_rng(1)
+    chain = rng.normal(size=(30, 8, 2))
+    chain[:, 0, 1] = 0.25  # one walker never accepted a move in y: its autocorrelation is 0/0
+    conv = convergence(chain, ("x", "y"))
+    assert not conv.converged
+    assert any("walker never moved" in p and "y" in p for p in conv.problems)
+    assert 0 <= conv.discard <= 15
 
 
 @pytest.mark.slow

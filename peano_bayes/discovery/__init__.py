@@ -6,6 +6,7 @@ runs split into fit and held-out, covariates) -> :func:`discover` (base fit, dia
 :data:`LIBRARY`, gates) -> :func:`write_report`. :mod:`.harness` validates it on data with hidden effects.
 """
 
+from .. import jax_config  # noqa: F401  (float64 before any JAX array is made; see peano_bayes.jax_config)
 from .data import SplitData, discovery_data
 from .effects import CONFUSABLE, LIBRARY, NOISE_EFFECTS, PHYSICS_EFFECTS, Effect
 from .model import DEFAULT_BASE, SUPERSET_CONFIG

@@ -1,6 +1,7 @@
 """Inference: priors as data (``priors/*.toml``), the likelihood of rig data, the posterior, multi-start least
 squares, resumable emcee sampling and arviz results."""
 
+from .. import jax_config  # noqa: F401  (float64 before any JAX array is made; see peano_bayes.jax_config)
 from .fit import DEFAULT_NOISE, FitResult, fit, fit_quality
 from .likelihood import (
     DEFAULT_BIN_SIZES,

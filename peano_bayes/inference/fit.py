@@ -17,6 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from ..defaults import DEFAULT_STARTS
 from ..physics import ModelConfig
 from .likelihood import OBSERVED, SOLVER_TOLERANCE, Observations, bin_noise_sd, predict
 from .priors import Prior
@@ -132,7 +133,7 @@ def fit(
     prior: Prior,
     *,
     config: ModelConfig | None = None,
-    n_starts: int = 16,
+    n_starts: int = DEFAULT_STARTS,
     seed: int = 0,
     max_steps: int = 80,
     noise: dict | None = None,

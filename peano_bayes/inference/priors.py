@@ -636,6 +636,33 @@ def _loc_scale(path, name: str, entry: Mapping, dist: str) -> tuple[float, float
     return 0.0, 1.0
 
 
+def starting_prior(like: str, *, material: str = "MY") -> str:
+    """The text of a prior file to edit for a muscle of one's own: it ``extends`` the bundled prior file of
+    material ``like`` (so it keeps that material's ``[config]``) and writes out every parameter entry of that
+    material's merged prior, each with its unit and provenance, so the user sees the whole prior and edits in
+    place. ``material`` [str] is the code written into ``meta.material``. Loads like any prior file once saved
+    (``extends`` is resolved among the bundled priors)."""
+    import tomli_w
+
+    prior = load_prior(like)
+    start = prior.files[-1]
+    header = (
+        f"# Prior for material {material}, started from the bundled prior of {like} ({start.name}).\n"
+        "# Edit the entries your material calls for (distribution, its fields, low/high, provenance); delete an\n"
+        f"# entry to take {like}'s. Format: docs/inference.md#prior-files. Fit with\n"
+        f"#   peano-bayes fit DATA.csv --prior THIS_FILE.toml\n\n"
+    )
+    document = {
+        "meta": {
+            "material": material,
+            "extends": start.name,
+            "description": f"starting prior for {material}, from the bundled prior of {like}",
+        },
+        "parameters": {name: dict(prior.marginals[name].spec) for name in prior.names},
+    }
+    return header + tomli_w.dumps(document)
+
+
 __all__ = [
     "ALL_PARAMETERS",
     "DEFAULT_PRIORS_DIR",
@@ -646,4 +673,5 @@ __all__ = [
     "parse_entry",
     "prior_files",
     "prior_for",
+    "starting_prior",
 ]

@@ -44,13 +44,12 @@ import emcee
 import numpy as np
 from scipy import stats
 
+from ..defaults import DEFAULT_CHUNK, DEFAULT_MAX_STEPS, DEFAULT_WARMUP
+from ..errors import PeanoBayesError, PeanoBayesInputError
 from .posterior import Posterior
 
-#: Default step limit. FC, the slowest-mixing bundled material, had tau_max 200 steps at 12000 and 265 at 17300
-#: (R-hat 1.03): the ~100 tau that R-hat <= 1.01 needs with walkers as chains is 20000-30000 steps; converged
-#: runs stop long before.
-DEFAULT_MAX_STEPS = 40_000
-#: Convergence targets (DESIGN, issue 4).
+#: Convergence targets: chains of at least 50 integrated autocorrelation times, split R-hat <= 1.01 and bulk
+#: ESS >= 1000 for every parameter.
 TARGETS = {"min_tau_lengths": 50.0, "max_rhat": 1.01, "min_ess_bulk": 1000.0}
 #: Moves before any proposal is fitted (emcee's recommended differential-evolution mix).
 MOVES = ((emcee.moves.DEMove, 0.8), (emcee.moves.DESnookerMove, 0.2))
@@ -191,9 +190,12 @@ def convergence(chain: np.ndarray, names=None, start: int = 0) -> Convergence:
     against :data:`TARGETS`; ``discard`` counts from the chain's first step."""
     sampled = chain[start:]
     steps = sampled.shape[0]
-    tau = emcee.autocorr.integrated_time(sampled, tol=0)
+    with np.errstate(invalid="ignore", divide="ignore"):  # a parameter no walker moved has no defined tau
+        tau = emcee.autocorr.integrated_time(sampled, tol=0)
+    stuck = ~np.isfinite(tau)
+    tau = np.where(stuck, np.inf, tau)
     tau_max = float(np.max(tau))
-    discard = min(int(np.ceil(2.0 * tau_max)), steps // 2)
+    discard = min(int(np.ceil(2.0 * tau_max)), steps // 2) if np.isfinite(tau_max) else steps // 2
     kept = sampled[discard:].swapaxes(0, 1)
     discard += start
     draws = {f"p{i}": kept[..., i] for i in range(kept.shape[-1])}
@@ -204,6 +206,8 @@ def convergence(chain: np.ndarray, names=None, start: int = 0) -> Convergence:
     names = list(names) if names is not None else list(draws)
     lengths = (chain.shape[0] - discard) / tau_max
     problems = []
+    if stuck.any():
+        problems.append(f"autocorrelation time undefined (a walker never moved) for {', '.join(names[i] for i in np.flatnonzero(stuck)[:4])}")
     if lengths < TARGETS["min_tau_lengths"]:
         problems.append(f"chain is {lengths:.1f} autocorrelation times long (target {TARGETS['min_tau_lengths']:g})")
     for label, values, bad in (
@@ -285,9 +289,9 @@ def sample(
     *,
     n_walkers: int | None = None,
     seed: int = 0,
-    chunk: int = 500,
+    chunk: int = DEFAULT_CHUNK,
     max_steps: int = DEFAULT_MAX_STEPS,
-    warmup: int = 300,
+    warmup: int = DEFAULT_WARMUP,
     state_path: str | os.PathLike | None = None,
     resume: bool = False,
     progress: bool = True,
@@ -306,7 +310,7 @@ def sample(
     if resume and state_path is not None and state_path.exists():
         chain, lps, rng_state, saved = load_state(state_path)
         if any(saved.get(k) != v for k, v in meta.items()):
-            raise ValueError(
+            raise PeanoBayesInputError(
                 f"{state_path}: saved state is of another run (names, walkers, seed or warm-up differ); "
                 "delete it or run without --resume"
             )
@@ -328,7 +332,18 @@ def sample(
         sampler = emcee.EnsembleSampler(n_walkers, ndim, posterior.batched, vectorize=True, moves=moves_for(proposal))
         t0 = time.perf_counter()
         label = "warm-up" if in_warmup else "steps"
-        state = sampler.run_mcmc(state, n, progress=progress, progress_kwargs={"desc": f"{label} {done}-{done + n}"})
+        try:
+            state = sampler.run_mcmc(
+                state, n, progress=progress, progress_kwargs={"desc": f"{label} {done}-{done + n}"}
+            )
+        except ValueError as err:  # emcee refuses walkers that span fewer than ndim dimensions
+            if "condition number" not in str(err):
+                raise
+            raise PeanoBayesError(
+                f"the {n_walkers} walkers collapsed onto fewer than {ndim} dimensions at step {done}: the data do not "
+                f"determine all {ndim} sampled parameters ({', '.join(posterior.names)}); fit more tests or runs, "
+                "or narrow the prior"
+            ) from None
         chain = np.concatenate([chain, sampler.get_chain()])
         lps = np.concatenate([lps, sampler.get_log_prob()])
         accepted = float(np.mean(sampler.acceptance_fraction))

@@ -5,6 +5,7 @@ into a muscle in ``model``; ``simulate`` runs the paper's four rig tests; ``metr
 from signals; ``reference`` holds the paper's two reference models (Sarosi, Veale).
 """
 
+from .. import jax_config  # noqa: F401  (float64 before any JAX array is made; see peano_bayes.jax_config)
 from . import elements, metrics, pouch, reference
 from .geometry import PAPER_GEOMETRY, VALIDATION_GEOMETRY, Geometry, scale_parameters
 from .model import (

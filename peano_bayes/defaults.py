@@ -1,0 +1,22 @@
+"""The settings of a fit that the command line shows in its help, kept free of JAX so ``--help`` is instant.
+
+:func:`peano_bayes.pipeline.infer` and :func:`peano_bayes.inference.sample.sample` take their defaults from here.
+"""
+
+from __future__ import annotations
+
+#: Every rig test a fit can use, in the data format's order.
+ALL_TESTS = ("load_cycle", "blocking", "stroke", "step")
+#: Tests fitted by default. The step response, sampled at 1 kHz and simulated through the inlet restriction,
+#: costs about 20 times the three quasi-static tests together per evaluation, so it is opt-in.
+DEFAULT_TESTS = ("load_cycle", "blocking", "stroke")
+#: Sampler steps after which a chain that has not met the convergence gates stops, marked unconverged.
+DEFAULT_MAX_STEPS = 40_000
+#: Least-squares starts (one vmapped Levenberg-Marquardt solve from each).
+DEFAULT_STARTS = 16
+#: Sampler steps between saved states and convergence checks.
+DEFAULT_CHUNK = 500
+#: Warm-up steps (discarded) that fit the sampler's proposal.
+DEFAULT_WARMUP = 300
+#: Probability mass of the reported highest-density intervals (arviz's default).
+HDI_PROB = 0.94
