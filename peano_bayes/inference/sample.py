@@ -207,7 +207,8 @@ def convergence(chain: np.ndarray, names=None, start: int = 0) -> Convergence:
     lengths = (chain.shape[0] - discard) / tau_max
     problems = []
     if stuck.any():
-        problems.append(f"autocorrelation time undefined (a walker never moved) for {', '.join(names[i] for i in np.flatnonzero(stuck)[:4])}")
+        which = ", ".join(names[i] for i in np.flatnonzero(stuck)[:4])
+        problems.append(f"autocorrelation time undefined (a walker never moved) for {which}")
     if lengths < TARGETS["min_tau_lengths"]:
         problems.append(f"chain is {lengths:.1f} autocorrelation times long (target {TARGETS['min_tau_lengths']:g})")
     for label, values, bad in (
