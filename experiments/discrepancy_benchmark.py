@@ -29,7 +29,8 @@ workflow was run at SNR 4 on seeds 11000-11021 (``--snr 4``, the eight effects o
 ``--first-seed 12000``. None of these seeds is reused for a final run.
 The label never reaches ``discover``.
 
-Resumable: every finished run is one line of ``OUT/runs-<worker>.jsonl``; a rerun skips what is there. Writes
+Resumable: every finished run is one line of ``OUT/runs-<worker>.jsonl``; a rerun skips what is there (the
+committed runs store these rows gzip-compressed, ``runs-<worker>.jsonl.gz``, and are read the same way). Writes
 ``OUT/confusion.csv``, ``OUT/recall.csv``, ``OUT/false_positives.csv``, ``OUT/gap.csv``, ``OUT/BENCHMARK.md``
 and prints one JSON object as its last line.
 
@@ -39,6 +40,7 @@ and prints one JSON object as its last line.
 from __future__ import annotations
 
 import argparse
+import gzip
 import hashlib
 import json
 import os
@@ -115,14 +117,20 @@ def _calibrate(out: Path, all_cases) -> dict:
     return strengths
 
 
+def run_logs(out: Path) -> list[Path]:
+    """The run logs of a benchmark folder: ``runs-<worker>.jsonl``, and ``runs-<worker>.jsonl.gz`` (how a finished
+    run's rows are committed; a resumed run appends new rows to a plain ``.jsonl`` beside it)."""
+    return sorted([*out.glob("runs*.jsonl"), *out.glob("runs*.jsonl.gz")])
+
+
+def log_rows(log: Path) -> list[dict]:
+    """The rows of one run log (plain or gzip-compressed JSON lines), blank lines skipped."""
+    with (gzip.open if log.suffix == ".gz" else open)(log, "rt") as fh:
+        return [json.loads(line) for line in fh if line.strip()]
+
+
 def _read_rows(out: Path) -> dict:
-    done = {}
-    for log in sorted(out.glob("runs*.jsonl")):
-        for line in log.read_text().splitlines():
-            if line.strip():
-                row = json.loads(line)
-                done[row["key"]] = row
-    return done
+    return {row["key"]: row for log in run_logs(out) for row in log_rows(log)}
 
 
 def _todo(out: Path, snrs, noise_levels, seeds: int, first_seed: int, only=None) -> list[tuple[Case, int]]:
@@ -317,7 +325,7 @@ def main(argv=None) -> int:
         metavar="LABEL",
         help="only these cases (default: all); 'none' is every noise level",
     )
-    parser.add_argument("--analyse-only", action="store_true", help="only rebuild the tables from runs*.jsonl")
+    parser.add_argument("--analyse-only", action="store_true", help="only rebuild the tables from runs*.jsonl[.gz]")
     parser.add_argument(
         "--pool",
         nargs="+",
