@@ -46,11 +46,11 @@ from scipy import stats
 
 from .posterior import Posterior
 
-#: Default step limit. FC, the slowest-mixing bundled material, had tau_max 200 steps at 12000 and 265 at 17300
+#: Default step limit. FC, the slowest-mixing bundled material, has tau_max 200 steps at 12000 and 265 at 17300
 #: (R-hat 1.03): the ~100 tau that R-hat <= 1.01 needs with walkers as chains is 20000-30000 steps; converged
 #: runs stop long before.
 DEFAULT_MAX_STEPS = 40_000
-#: Convergence targets (DESIGN, issue 4).
+#: Convergence targets: run length over the autocorrelation time, split R-hat, bulk ESS.
 TARGETS = {"min_tau_lengths": 50.0, "max_rhat": 1.01, "min_ess_bulk": 1000.0}
 #: Moves before any proposal is fitted (emcee's recommended differential-evolution mix).
 MOVES = ((emcee.moves.DEMove, 0.8), (emcee.moves.DESnookerMove, 0.2))
