@@ -1,9 +1,9 @@
 """The held-out gap ratio a perfect workflow would reach at the benchmark's SNR, with the base *refitted*.
 
 The benchmark scores a correct detection by ``RMSE after / before`` on the held-out runs of the test with the
-largest gap before (``peano_bayes.discovery.harness.score``); issue 6's target is <= 0.5.
-``discrepancy_gap_bound.py`` bounds that ratio with the base at the *true* parameters, which overstates the gap a
-real "before" leaves: the benchmark's base is refitted and absorbs part of the effect. This script measures the
+largest gap before (``peano_bayes.discovery.harness.score``); the target is <= 0.5. A bound with the base at the
+*true* parameters would overstate the gap a real "before" leaves: the benchmark's base is refitted and absorbs
+part of the effect. This script measures the
 ratio with the same refits the workflow makes, on data whose load-cell and strain noise are shrunk ``--shrink``
 times (the pressure sensors keep the rig's noise, so input denoising leaves its real floor), per test, on the
 held-out bins [signal unit]:

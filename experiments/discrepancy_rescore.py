@@ -1,12 +1,12 @@
-"""Re-score a benchmark's logged candidates under the current identification gate (issue 6).
+"""Re-score a benchmark's logged candidates under the current identification gate.
 
 Every screened candidate of every run in ``OUT/runs-*.jsonl[.gz]`` carries its evidence and gate results. This
 recomputes gate 6 (:func:`peano_bayes.discovery.workflow.identified`) from the logged correlation and held-out
 elpd, keeps the other gates as logged, and counts the candidates whose pass/fail would change. If none changes,
-the run's every decision, and so its verdicts and tables, are the same under the current gates. Runs from before
-gate 6 existed (3000-3021, 4000-4021) show what the gate rejects there.
+the run's every decision, and so its verdicts and tables, are the same under the current gates; on a run logged
+before a change of gate 6 it shows what the change would have rejected or let through.
 
-    python experiments/discrepancy_rescore.py experiments/discrepancy-5000 experiments/discrepancy-4000
+    python experiments/discrepancy_rescore.py experiments/discrepancy-10000 experiments/discrepancy-11000
 
 Last line: one JSON object, per directory the number of runs, candidates, and flips (with their keys).
 """
