@@ -1,4 +1,4 @@
-"""Discovery on the paper's eight muscles (the bundled datasets), issue 6 item 5.
+"""Discovery on the paper's eight muscles (the bundled datasets).
 
 For each material: ``discover`` on specimen A's load cycles, blocking and stroke tests (the 1 kHz step
 response is left out: its 801-sample backward-Euler simulation makes each refit minutes long, so

@@ -1,35 +1,19 @@
-"""Validation of `peano-bayes discover` on virtual-rig data with a hidden effect (issue 6).
+"""Validation of `peano-bayes discover` on virtual-rig data with a hidden effect.
 
 Cases (peano_bayes.discovery.harness): each hideable library effect at several signal-to-noise ratios; no
 effect at several noise levels (false positives); slow load-cell drift (outside the library); two effects at
-once. ``--seeds`` seeds per case, starting at ``--first-seed`` (default 10000). Seed history: tuning used 0-9, the
-tests use 100-199, a first final run on 1000-1019 was stopped after 6 runs (non-confusable rivals made verdicts
-ambiguous), and a full run on 2000-2019 (SNR 1, 2, 4; ``Gates.min_elpd_z`` 1.0) became tuning evidence for the
-gates: it is kept in ``discrepancy/tuning/``. The final run on 3000-3021 (workflow of commit b3a1ce2, in
-``discrepancy/``) became tuning evidence for the session baseline (its drift misses; checks in
-``discrepancy/tuning/session_baseline/``). The final run on 4000-4021 (workflow a5a94e6, in
-``discrepancy-4000/``) became tuning evidence for the joint strength test, the identification gate and per-run
-inputs (its misses: damping failing only the marginal strength test, series compliance passing on no-effect
-data at correlation 0.98 with the tensile stiffness, cyclic softening failing its own-signature gate; see
-``discrepancy_identifiability.py``), so the next final run used 5000 on: the run on 5000-5021 (workflow 7b1aa5f,
-``discrepancy-5000/``). Seeds 4000-4021 were used again to tune the pressure-averaging candidate
-(``discrepancy-4000/tuning/pressure_average/``), whose adoption was decided before its final run on 6000-6021
-(68112ca plus that patch, ``discrepancy-6000/``). Seeds 7000-7021 extend the 6000 run for five cases with the
-same workflow (``--cases none drift threshold_pressure``, ``discrepancy-7000/PREREGISTRATION.md``). Seeds
-6000-6021 were then used again to tune every-sample bin means in blocking and stroke
-(``discrepancy-6000/tuning/exact_bin_means/``), adopted in 4c9a133 before its final run on 8000-8021
-(``discrepancy-8000/PREREGISTRATION.md``). Seeds 8000-8021 were then used again to tune holding out the last
-repeat of each condition instead of the second (``discrepancy-8000/tuning/last_repeat_held_out/``), adopted
-before its final run on 9000-9021 (``discrepancy-9000/PREREGISTRATION.md``). Seeds 9000-9021 were then used again
-to tune letting the sensor's offset and gain compete with physics on held-out gain
-(``discrepancy-9000/tuning/offset_competes/``), adopted before its final run on 10000-10021
-(``discrepancy-10000/PREREGISTRATION.md``): that is the current final run, and the defaults run it. The same
-workflow was run at SNR 4 on seeds 11000-11021 (``--snr 4``, the eight effects only,
-``discrepancy-11000/PREREGISTRATION.md``). A final run of any later workflow change starts at
-``--first-seed 12000``. None of these seeds is reused for a final run.
-The label never reaches ``discover``.
+once. ``--seeds`` seeds per case, starting at ``--first-seed`` (default 10000). The label never reaches
+``discover``.
 
-Resumable: every finished run is one line of ``OUT/runs-<worker>.jsonl``; a rerun skips what is there. Writes
+**Seeds.** A final run uses seeds no earlier run used, so the workflow is never judged on the data it was
+tuned on. The tests use 100-199; every other seed below 12000 is spent (the runs behind them are in the git history of
+``experiments/``, e.g. ``git log --stat -- experiments/``). The committed final runs of the current workflow
+are ``discrepancy-10000/`` (seeds 10000-10021, SNR 2, the defaults) and ``discrepancy-11000/`` (seeds
+11000-11021, ``--snr 4``, the eight effects only), each with its ``PREREGISTRATION.md``. A final run of any
+later workflow change starts at ``--first-seed 12000``.
+
+Resumable: every finished run is one line of ``OUT/runs-<worker>.jsonl``; a rerun skips what is there (the
+committed runs store these rows gzip-compressed, ``runs-<worker>.jsonl.gz``, and are read the same way). Writes
 ``OUT/confusion.csv``, ``OUT/recall.csv``, ``OUT/false_positives.csv``, ``OUT/gap.csv``, ``OUT/BENCHMARK.md``
 and prints one JSON object as its last line.
 
@@ -39,6 +23,7 @@ and prints one JSON object as its last line.
 from __future__ import annotations
 
 import argparse
+import gzip
 import hashlib
 import json
 import os
@@ -115,14 +100,20 @@ def _calibrate(out: Path, all_cases) -> dict:
     return strengths
 
 
+def run_logs(out: Path) -> list[Path]:
+    """The run logs of a benchmark folder: ``runs-<worker>.jsonl``, and ``runs-<worker>.jsonl.gz`` (how a finished
+    run's rows are committed; a resumed run appends new rows to a plain ``.jsonl`` beside it)."""
+    return sorted([*out.glob("runs*.jsonl"), *out.glob("runs*.jsonl.gz")])
+
+
+def log_rows(log: Path) -> list[dict]:
+    """The rows of one run log (plain or gzip-compressed JSON lines), blank lines skipped."""
+    with (gzip.open if log.suffix == ".gz" else open)(log, "rt") as fh:
+        return [json.loads(line) for line in fh if line.strip()]
+
+
 def _read_rows(out: Path) -> dict:
-    done = {}
-    for log in sorted(out.glob("runs*.jsonl")):
-        for line in log.read_text().splitlines():
-            if line.strip():
-                row = json.loads(line)
-                done[row["key"]] = row
-    return done
+    return {row["key"]: row for log in run_logs(out) for row in log_rows(log)}
 
 
 def _todo(out: Path, snrs, noise_levels, seeds: int, first_seed: int, only=None) -> list[tuple[Case, int]]:
@@ -317,7 +308,7 @@ def main(argv=None) -> int:
         metavar="LABEL",
         help="only these cases (default: all); 'none' is every noise level",
     )
-    parser.add_argument("--analyse-only", action="store_true", help="only rebuild the tables from runs*.jsonl")
+    parser.add_argument("--analyse-only", action="store_true", help="only rebuild the tables from runs*.jsonl[.gz]")
     parser.add_argument(
         "--pool",
         nargs="+",

@@ -1,14 +1,14 @@
-"""How much of each hidden effect the base model can absorb (why some effects are missed at SNR 2, issue 6).
+"""How much of each hidden effect the base model can absorb (why some effects are missed at SNR 2).
 
 The benchmark's SNR (peano_bayes.discovery.harness) is ``max over tests of RMS(y_with - y_without) / sigma``
-at *equal* base parameters, as research/DISCREPANCY.md section 4 defines it. Discovery, though, sees only what
-is left after the base model (tensile + bending stiffness, free) is refitted: the part of the effect's signal
-the base cannot mimic. This script measures that part. For each hideable effect at the strength the final
-benchmark used for SNR 2 (``experiments/discrepancy-5000/strengths.json``), it simulates the harness's rig data
-with the load-cell noise shrunk ``--shrink`` times (so the fit sees the same relative weights of force and
-strain tests but noise does not blur the misfit), fits the base model from four starts and the base plus the
-hidden effect from the truth, and reports per test the RMS of the binned misfit on the fitted and held-out
-runs, in units of the rig's per-sample noise at 0.2 N (the SNR's sigma):
+at *equal* base parameters. Discovery, though, sees only what is left after the base model (tensile + bending
+stiffness, free) is refitted: the part of the effect's signal the base cannot mimic. This script measures that
+part. For each hideable effect at the strength the final benchmark used for SNR 2 (``--strengths``, default the
+current final run's ``experiments/discrepancy-10000/strengths.json``), it simulates the harness's rig data with
+the load-cell noise shrunk ``--shrink`` times (so the fit sees the same relative weights of force and strain
+tests but noise does not blur the misfit), fits the base model from four starts and the base plus the hidden
+effect from the truth, and reports per test the RMS of the binned misfit on the fitted and held-out runs, in
+units of the rig's per-sample noise at 0.2 N (the SNR's sigma):
 
 - ``snr_nominal``: the benchmark's SNR of that test (signal at equal base parameters);
 - ``snr_left_base``: what the refitted base leaves (the signal discovery can see);
@@ -21,8 +21,10 @@ base absorbs (series compliance): it adds, per factor F, ``snr_left_coupon_F``, 
 tensile parameters pinned at F times the truth (F = 1 a perfect coupon test, 0.9 / 1.1 one 10 % off) and the
 bending parameters refitted from the free base fit.
 
-Writes ``OUT/identifiability.csv`` and ``OUT/IDENTIFIABILITY.md`` (``-snr<SNR>`` added to both names for
-another SNR or a subset of effects); last line one JSON object.
+Writes ``OUT/identifiability.csv`` and ``OUT/IDENTIFIABILITY.md`` (default OUT: ``checks/identifiability`` in
+the current final run's folder; ``-snr<SNR>`` added to both names for another SNR or a subset of effects); last
+line one JSON object. Tables made with an earlier workflow are in the git history, e.g.
+``1555d13:experiments/discrepancy-6000/IDENTIFIABILITY-snr2.md``.
 
     python experiments/discrepancy_identifiability.py
     python experiments/discrepancy_identifiability.py --snr 8 --effects series_compliance threshold_pressure
@@ -86,7 +88,7 @@ def _coupon_fit(free_base, truth, factor: float, split):
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--strengths", default=str(HERE / "discrepancy-5000" / "strengths.json"))
+    parser.add_argument("--strengths", default=str(HERE / "discrepancy-10000" / "strengths.json"))
     parser.add_argument("--snr", type=float, default=2.0)
     parser.add_argument("--shrink", type=float, default=100.0, help="noise divisor of the simulated data")
     parser.add_argument("--seed", type=int, default=0)
@@ -99,7 +101,7 @@ def main(argv=None) -> int:
         metavar="FACTOR",
         help="also fit the base with its tensile stiffness pinned at FACTOR x the truth",
     )
-    parser.add_argument("--out", default=str(HERE / "discrepancy-5000"))
+    parser.add_argument("--out", default=str(HERE / "discrepancy-10000" / "checks" / "identifiability"))
     args = parser.parse_args(argv)
     enable_compilation_cache()
     strengths = json.loads(Path(args.strengths).read_text())

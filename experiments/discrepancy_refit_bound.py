@@ -1,9 +1,9 @@
 """The held-out gap ratio a perfect workflow would reach at the benchmark's SNR, with the base *refitted*.
 
 The benchmark scores a correct detection by ``RMSE after / before`` on the held-out runs of the test with the
-largest gap before (``peano_bayes.discovery.harness.score``); issue 6's target is <= 0.5.
-``discrepancy_gap_bound.py`` bounds that ratio with the base at the *true* parameters, which overstates the gap a
-real "before" leaves: the benchmark's base is refitted and absorbs part of the effect. This script measures the
+largest gap before (``peano_bayes.discovery.harness.score``); the target is <= 0.5. A bound with the base at the
+*true* parameters would overstate the gap a real "before" leaves: the benchmark's base is refitted and absorbs
+part of the effect. This script measures the
 ratio with the same refits the workflow makes, on data whose load-cell and strain noise are shrunk ``--shrink``
 times (the pressure sensors keep the rig's noise, so input denoising leaves its real floor), per test, on the
 held-out bins [signal unit]:
@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -56,6 +57,9 @@ from peano_bayes.discovery.harness import (
 from peano_bayes.discovery.model import DEFAULT_BASE
 from peano_bayes.discovery.workflow import fit_base
 from peano_bayes.inference.results import write_atomic_text
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from discrepancy_benchmark import log_rows, run_logs  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 
@@ -102,8 +106,8 @@ def bound_rows(effect: str, strength: float, seed: int, shrink: float) -> list[d
 
 def observed_ratios(run: Path, snr: float) -> pd.DataFrame:
     """The run's correct single-effect detections at ``snr``: effect and gap ratio."""
-    rows = [json.loads(line) for log in sorted(run.glob("runs*.jsonl")) for line in log.read_text().splitlines()]
-    rows = [r for r in rows if r and r["correct"] and len(r["effects"]) == 1 and r["snr"] == snr]
+    rows = [r for log in run_logs(run) for r in log_rows(log)]
+    rows = [r for r in rows if r["correct"] and len(r["effects"]) == 1 and r["snr"] == snr]
     return pd.DataFrame({"effect": [r["effects"][0] for r in rows], "ratio": [r["gap_ratio"] for r in rows]})
 
 

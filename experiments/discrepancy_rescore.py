@@ -1,12 +1,12 @@
-"""Re-score a benchmark's logged candidates under the current identification gate (issue 6).
+"""Re-score a benchmark's logged candidates under the current identification gate.
 
-Every screened candidate of every run in ``OUT/runs-*.jsonl`` carries its evidence and gate results. This
+Every screened candidate of every run in ``OUT/runs-*.jsonl[.gz]`` carries its evidence and gate results. This
 recomputes gate 6 (:func:`peano_bayes.discovery.workflow.identified`) from the logged correlation and held-out
 elpd, keeps the other gates as logged, and counts the candidates whose pass/fail would change. If none changes,
-the run's every decision, and so its verdicts and tables, are the same under the current gates. Runs from before
-gate 6 existed (3000-3021, 4000-4021) show what the gate rejects there.
+the run's every decision, and so its verdicts and tables, are the same under the current gates; on a run logged
+before a change of gate 6 it shows what the change would have rejected or let through.
 
-    python experiments/discrepancy_rescore.py experiments/discrepancy-5000 experiments/discrepancy-4000
+    python experiments/discrepancy_rescore.py experiments/discrepancy-10000 experiments/discrepancy-11000
 
 Last line: one JSON object, per directory the number of runs, candidates, and flips (with their keys).
 """
@@ -15,28 +15,28 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 from peano_bayes.discovery.workflow import Gates, identified
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from discrepancy_benchmark import log_rows, run_logs  # noqa: E402
 
 
 def rescore(out: Path, gates: Gates | None = None) -> dict:
     gates = gates or Gates()
     runs = candidates = 0
     flips = []
-    for log in sorted(out.glob("runs*.jsonl")):
-        for line in log.read_text().splitlines():
-            if not line.strip():
-                continue
-            row = json.loads(line)
-            runs += 1
-            for step, screened in enumerate(row.get("screened", [])):
-                for name, ev in screened.items():
-                    candidates += 1
-                    others = all(v for k, v in ev["gates"].items() if k != "identified")
-                    now = others and identified(ev["max_correlation_with_base"], ev["delta_elpd"], ev["elpd_se"], gates)
-                    if now != ev["passed"]:
-                        flips.append(f"{row['key']} step {step} {name}: {'passes' if now else 'fails'} now")
+    for row in (row for log in run_logs(out) for row in log_rows(log)):
+        runs += 1
+        for step, screened in enumerate(row.get("screened", [])):
+            for name, ev in screened.items():
+                candidates += 1
+                others = all(v for k, v in ev["gates"].items() if k != "identified")
+                now = others and identified(ev["max_correlation_with_base"], ev["delta_elpd"], ev["elpd_se"], gates)
+                if now != ev["passed"]:
+                    flips.append(f"{row['key']} step {step} {name}: {'passes' if now else 'fails'} now")
     return {"runs": runs, "candidates": candidates, "flips": len(flips), "flipped": flips}
 
 

@@ -130,8 +130,9 @@ RIG_TESTS: tuple[str, ...] = tuple(TESTS)
 
 @dataclass(frozen=True)
 class Quirk:
-    """A physical effect the rig can switch on: its DESIGN.md section 5 ``name``, what it is, and ``switch``,
-    which returns the model configuration with the element on (unchanged if it already is)."""
+    """A physical effect the rig can switch on: its ``name`` (as in :data:`peano_bayes.discovery.effects.LIBRARY`),
+    what it is, and ``switch``, which returns the model configuration with the element on (unchanged if it
+    already is)."""
 
     name: str
     meaning: str
@@ -162,9 +163,9 @@ _QUIRK_LIST = (
     ),
     Quirk("nonlinear_damping", "direction-dependent and quadratic load damping (damping_*)", _replace(damping=True)),
 )
-#: name -> :class:`Quirk`, the DESIGN.md section 5 effects that map onto a switch of :class:`ModelConfig`.
+#: name -> :class:`Quirk`, the effects that map onto a switch of :class:`ModelConfig`.
 QUIRKS: dict[str, Quirk] = {q.name: q for q in _QUIRK_LIST}
-#: DESIGN.md section 5 effects that are parameter values of every model rather than switches.
+#: Effects that are parameter values of every model rather than switches.
 _NOT_SWITCHES = {
     "bending_stiffness": "set bending_k1_n / bending_k2_n instead",
     "tensile_stiffness": "set tensile_ka_n_per_m / tensile_kb_n_per_m2 instead",
@@ -505,11 +506,10 @@ def simulate_dataset(
       parameter the final configuration reads and ``true_params`` lacks takes ``PARAMETERS[name].nominal``,
       also for quirks (note: the nominal load damping is 0, so ``nonlinear_damping`` needs
       ``damping_*`` values to have an effect). Names the configuration does not read are ignored.
-    - ``config``: the model the data come from; ``quirks``: names of :data:`QUIRKS` (DESIGN.md section 5
-      effects) whose elements are switched on in ``config`` (``series_compliance`` -> ``mount``,
-      ``hysteresis`` -> Dahl friction, ``viscoelastic_relaxation`` -> one parallel Maxwell branch,
-      ``strain_stiffening`` -> ``extension``, ``threshold_pressure`` -> ``threshold``, ``nonlinear_damping`` ->
-      ``damping``).
+    - ``config``: the model the data come from; ``quirks``: names of :data:`QUIRKS` (effects) whose elements
+      are switched on in ``config`` (``series_compliance`` -> ``mount``, ``hysteresis`` -> Dahl friction,
+      ``viscoelastic_relaxation`` -> one parallel Maxwell branch, ``strain_stiffening`` -> ``extension``,
+      ``threshold_pressure`` -> ``threshold``, ``nonlinear_damping`` -> ``damping``).
     - ``seed``: every random draw derives from it; the same arguments give the same dataset, and the same bytes
       through :func:`peano_bayes.data.save`. Streams are keyed by (specimen, test, run), so a
       smaller run reproduces the matching part of a larger one.

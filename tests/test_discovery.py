@@ -1,7 +1,7 @@
-"""Discrepancy workflow (issue 6): effect library, nesting, residual tests, the `discover` command, and a small
-version of the hidden-effect validation (experiments/discrepancy_benchmark.py runs the full one).
+"""Discrepancy workflow: effect library, nesting, residual tests, the `discover` command, and a small version of
+the hidden-effect validation (experiments/discrepancy_benchmark.py runs the full one).
 
-Seeds 100-199 are the tests' (the benchmark uses 1000 on, tuning used 0-9). Every run of the superset model
+The tests use seeds 100-199, which no benchmark run uses. Every run of the superset model
 shares one compilation per data shape, so the discover tests share one: the quasi-static tests of the harness
 protocol (the step response's compilation would add minutes; the benchmark covers it).
 """
@@ -241,7 +241,7 @@ def test_discover_cli_names_hidden_hysteresis_and_shrinks_the_gap(hysteresis_dat
     report = json.loads(last)
     assert report == json.loads((tmp_path / "out" / "report.json").read_text())
     # Named first and alone; the verdict may be ambiguous with a pre-declared confusable rival (one strain rate
-    # cannot tell friction from a Maxwell loop), which the benchmark and research/DISCREPANCY.md count as right.
+    # cannot tell friction from a Maxwell loop), which the benchmark's scoring counts as right.
     assert report["named"] == ["hysteresis"] and report["steps"][0]["effect"] == "hysteresis"
     for step in report["steps"]:  # a tie is either a confusable rival or a close call, never both
         assert not set(step["rivals"]) & set(step["close_calls"]) and step["effect"] not in step["close_calls"]
@@ -378,7 +378,7 @@ def test_strength_wald_reduces_to_the_marginal_z_for_one_parameter_and_is_joint_
 
 
 def test_identification_gate_needs_a_strong_held_out_gain_only_on_a_correlation_ridge():
-    """Gate 6 with the logged evidence of real cases: a tuning run's spurious series compliance (correlation
+    """Gate 6 with the logged evidence of real cases: a benchmark run's spurious series compliance (correlation
     0.98, gain 1.5 standard errors) fails; the bundled PC mount (0.98, 3.8 se) and any weakly correlated
     candidate pass; an undefined standard error never counts as strong."""
     gates = Gates()

@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from peano_bayes.physics import pouch
 
-# PHYSICS.md §1.1, derived from the closed forms (theta, eps, F/(p w l), V/(w^2 l)).
+# Reference values derived by hand from the pouch's closed forms (theta, eps, F/(p w l), V/(w^2 l)).
 # Values as printed; each is checked to half a unit of its last printed digit.
 TABLE = [
     (0.2, "0.0067", "4.90", "0.066"),

@@ -1,9 +1,9 @@
 """Reproductions and differentiability of the paper's two reference models (physics/reference.py).
 
-Targets come from Veale, Xie, Anderson (2016) (Tables 1-2, section 2) and the project's research notes
-(PHYSICS.md sections 1.2, 2 and 4.1). Tabulated values are checked to their printed precision: within
-0.6 units of the last printed digit (half a unit for rounding plus a little slack, because a few of the
-notes' entries sit right on a rounding boundary).
+Targets come from Veale, Xie, Anderson (2016) (Tables 1-2, section 2) and from consequences of the two models
+worked out by hand (Veale's force balance; Sarosi's static curves and their linearisation). Tabulated values
+are checked to their printed precision: within 0.6 units of the last printed digit (half a unit for rounding
+plus a little slack, because a few tabulated entries sit right on a rounding boundary).
 
 Compilation dominates the runtime, so each model is evaluated once per module on every pressure/strain
 the tests need (module fixtures), and each gradient check compiles one ``value_and_grad``.
@@ -134,7 +134,7 @@ def test_sarosi_table_of_research_notes(sarosi):
 
 
 def test_sarosi_structural_facts_of_research_notes(sarosi):
-    # PHYSICS.md section 2: 18.6-37 N at p = 0, eps = 0; a 4.4 % free strain at p = 0, where the upper
+    # Sarosi's curves: 18.6-37 N at p = 0, eps = 0; a 4.4 % free strain at p = 0, where the upper
     # curve (F -> a_u6 > 0) has no root at all (NaN); free strain -> 14.1 % on both curves as p -> inf.
     assert_printed(sarosi["lower0"]["zero"], 18.6, 0.1)
     assert_printed(sarosi["upper0"]["zero"], 37, 1)
@@ -155,7 +155,7 @@ def test_sarosi_stiffness_is_the_true_derivative():
 
 
 def test_sarosi_linearisation_of_research_notes(sarosi):
-    # PHYSICS.md 4.1 (42 N, l0 = 0.06 m): at 500 kPa k ~ 2.8e4 N/m, f_n ~ 12.9 Hz, zeta = 0.113,
+    # Sarosi's step model linearised (42 N, l0 = 0.06 m): at 500 kPa k ~ 2.8e4 N/m, f_n ~ 12.9 Hz, zeta = 0.113,
     # B ~ 78 N s/m; at 80 kPa k ~ 1.3e4 N/m, f_n ~ 8.8 Hz, zeta = 0.27.
     i80, i500 = SAROSI_P_KPA.index(80), SAROSI_P_KPA.index(500)
     k = -sarosi["stiffness_eq"]["table"]
@@ -195,7 +195,7 @@ def test_step_overshoots_like_research_notes(step_response):
     i = int(jnp.argmax(res.strain))
     peak, t_peak = float(res.strain[i]), float(t[i])
     assert peak > float(res.strain[-1]) + 0.03
-    # PHYSICS.md 4.1: peak 17.9 % at 38 ms.
+    # Sarosi's step model: peak 17.9 % at 38 ms.
     assert_printed(100 * peak, 17.9, 0.1)
     assert abs(1e3 * t_peak - 38) <= 1.0
 
@@ -232,7 +232,7 @@ def test_veale_required_reproductions(veale):
 def test_veale_table_of_research_notes(veale):
     assert_printed(veale["blocking"]["table"], [39.5, 80.1, 94.1, 155.2, 207.6, 254.9, 298.6], 0.1)
     np.testing.assert_allclose(veale["force"]["table"], veale["blocking"]["table"], rtol=1e-14)
-    # The notes' 30 and 100 kPa free strains (9.2, 11.5) sit 0.05 points above the exact roots (9.149, 11.448).
+    # The tabulated 30 and 100 kPa free strains (9.2, 11.5) sit 0.05 points above the exact roots (9.149, 11.448).
     assert_printed(100 * veale["free"]["table"], [9.2, 11.0, 11.5, 12.9, 13.8, 14.5, 15.0], 0.1)
     assert_printed(veale["force"]["curve500"], [299, 245, 182, 127, 89, 50], 1)
     # The free strain is the zero of the force.
@@ -240,7 +240,7 @@ def test_veale_table_of_research_notes(veale):
 
 
 def test_veale_flat_linkage_at_zero_pressure(veale):
-    # p = 0, eps <= 0: pure tensile spring F = ka d + kb d^2 with d = -eps w; the notes give 42 N at -1.5 %.
+    # p = 0, eps <= 0: pure tensile spring F = ka d + kb d^2 with d = -eps w; the reference value is 42 N at -1.5 %.
     d = -np.asarray(EXTENSION_EPS) * 0.015
     np.testing.assert_allclose(veale["force"]["extension0"], 1e5 * d + 3.889e8 * d**2, rtol=1e-12)
     assert_printed(veale["force"]["extension0"][1], 42, 1)
@@ -324,7 +324,7 @@ def test_veale_force_gradients():
     np.testing.assert_allclose(float(gq.width_m), (1e5 + 2 * 3.889e8 * d) * 0.015, rtol=1e-10)
     for field in ("area1_m2", "area2_m2", "bending_quartic_n_per_m5", "bending_linear_n_per_m2"):
         assert abs(float(getattr(gq, field))) < 1e-12
-    # muscle-level stiffness at 0 kPa, -1.5 % (l0 = 4 w = 0.06 m): 6.9e4 N/m in the notes
+    # muscle-level stiffness at 0 kPa, -1.5 % (l0 = 4 w = 0.06 m): 6.9e4 N/m worked out by hand
     assert_printed(-float(ge) / 0.06 / 1e4, 6.9, 0.1)
     # the linkage opens like u ~ p^2 from flat, so the force is stationary in pressure at p = 0
     assert abs(float(gp)) < 1e-12

@@ -1,5 +1,5 @@
 """Discrepancy workflow: find where the model and the data disagree, name the missing effect, add it, and show
-the gap shrink (research/DISCREPANCY.md; effect names of DESIGN.md section 5).
+the gap shrink (effect names: :data:`~peano_bayes.discovery.effects.LIBRARY`).
 
 Data flow: a rig :class:`~peano_bayes.data.Dataset` -> :func:`discovery_data` (one specimen, binned, whole
 runs split into fit and held-out, covariates) -> :func:`discover` (base fit, diagnosis, screening of the

@@ -4,10 +4,10 @@
 pressure) are numbered in the order they were run: the cycle index. The last run of every condition that has
 at least two runs is held out; the others are fitted. Held-out runs are repeats of fitted protocols, so the
 held-out error measures model error plus noise, not extrapolation to new conditions; holding out the last repeat
-(leave-future-out, research/DISCREPANCY.md) also asks a model to predict a specimen that changes from cycle to
-cycle forward in time. With the middle repeat held out (cycle index 1, until the 9000 run), the refitted base
-interpolated a softening specimen from its first and third runs and the held-out run kept little of the effect
-(gap bound 0.51 for cyclic softening, ``experiments/discrepancy-6000/GAP_BOUND.md``).
+(leave-future-out) also asks a model to predict a specimen that changes from cycle to cycle forward in time. A
+held-out middle repeat would not: the refitted base interpolates a softening specimen from the runs before and
+after it, and the held-out run keeps little of the effect (even a perfect model would then shrink the held-out
+gap of cyclic softening only to about 0.51 of the base's).
 
 **Noise:** each sensor's noise sd [signal unit per raw sample] is estimated from the raw signal alone
 (:func:`~peano_bayes.inference.denoise.noise_sd`, second differences, in the quasi-static tests), so the
@@ -17,23 +17,22 @@ samples has sd ``sd / sqrt(k)``.
 **Inputs:** every run is simulated from its own denoised strain, and from the pressure inputs (muscle and, in
 steps, supply pressure) averaged over the runs of its condition. The rig's realized strain follows the specimen:
 when the specimen changes between repeats (cyclic softening), so does the strain, and a strain averaged over the
-repeats put an input error that follows the cycle index into every run (on seeds 4000-4021 the fitted softening
-then left its own first-cycle signature at about half its size and failed that gate in 9 of 22 runs; with each
-run's own inputs, 7 of those 9 were named). The pressure follows the regulator's one command per condition, and
-its sensor's denoising error is independent from run to run, so the mean is the better input: with each run's
-own pressure the onset of a threshold pressure was blurred by that error (threshold pressure named in 10 of 22
-runs on seeds 4000-4021, 13 of 22 with shared pressure; ``experiments/discrepancy-4000/tuning/pressure_average``).
+repeats would put an input error that follows the cycle index into every run (the fitted softening then leaves
+its own first-cycle signature at about half its size and fails that gate). The pressure follows the regulator's
+one command per condition, and its sensor's denoising error is independent from run to run, so the mean is the
+better input: with each run's own pressure that error blurs the onset of a threshold pressure (on the
+benchmark's threshold-pressure data, named in 10 of 22 runs with each run's pressure, 13 of 22 with the
+average).
 Held-out runs share the average too; it uses their pressure inputs, never their observed force or strain.
 
 **Bins:** 4 samples (load cycles, blocking, stroke) and 2 (steps): screening many refits must be fast. A bin's
 prediction is the mean of the simulation at two quadrature nodes, exact for signals cubic in time, except in
 blocking and stroke (:data:`DISCOVERY_EVERY_SAMPLE`), simulated at every sample: their pressure ramps start at
-zero, where the force has kinks, and there two nodes left 0.88 of the rig's noise at 0-44 kPa of the harness's
-blocking ramp with quiet sensors, where a threshold pressure hides
-(``experiments/discrepancy-6000/FLOOR-threshold_pressure*.md``); every sample leaves 0.007. On the tuning seeds
-6000-6021 threshold pressure was then named in 20 of 22 runs (14 with two nodes) and 104 other runs kept their
-verdicts (``experiments/discrepancy-6000/tuning/exact_bin_means``). One-sample bins reach the same floor but
-weigh blocking and stroke four times against the load cycles, and cost found effects on the bundled muscles.
+zero, where the force has kinks, and there two nodes leave a model error of 0.88 of the rig's per-sample noise
+at 0-44 kPa of the harness's blocking ramp with quiet sensors, where a threshold pressure hides; every sample
+leaves 0.007 (threshold pressure at SNR 2 is then named in 20 of 22 benchmark runs instead of 14). One-sample
+bins reach the same floor but weigh blocking and stroke four times against the load cycles, and cost found
+effects on the bundled muscles.
 """
 
 from __future__ import annotations

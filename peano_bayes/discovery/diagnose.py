@@ -2,7 +2,7 @@
 correlation of residuals in time.
 
 **Signature statistic:** each signature is a weight vector ``w`` over the flat bins, built from covariates and
-the fitted model's predictions (research/DISCREPANCY.md section 2). Its strength in standardized residuals
+the fitted model's predictions. Its strength in standardized residuals
 ``r`` is ``T = |sum w r| / sqrt(sum w^2)`` (a z-score for white unit residuals). Its p-value is a block
 sign-flip test: the bins' contributions are summed per block (:data:`~peano_bayes.discovery.data.BLOCK_BINS`
 consecutive bins of one run), and the block sums' signs are flipped at random; under "no structure" a block sum

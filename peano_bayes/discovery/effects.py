@@ -1,4 +1,4 @@
-"""The closed library of candidate effects the discovery workflow may name (DESIGN.md section 5).
+"""The closed library of candidate effects the discovery workflow may name.
 
 Each :class:`Effect` frees a set of parameters of the discovery model (:mod:`.model`); while it is inactive
 those parameters sit at its ``off`` values, at which it changes no prediction (nesting, tested in
@@ -8,8 +8,8 @@ effect is accepted, and ``signature`` the residual pattern its absence leaves (:
 Physics effects are elements of :class:`~peano_bayes.physics.ModelConfig` (or, for ``cyclic_softening``, a
 per-cycle stiffness factor); noise-side effects change only the sensor or the noise model, so that a sensor
 problem is never reported as physics. The one flexible term, ``session_baseline``, describes slow structure
-against time in the session that no library effect produces (research/DISCREPANCY.md section 5: a flexible
-term may compete, but never names an effect); the workflow reports it as unexplained structure.
+against time in the session that no library effect produces (a flexible term may compete, but never names an
+effect); the workflow reports it as unexplained structure.
 """
 
 from __future__ import annotations
@@ -55,7 +55,7 @@ def parameter_spec(name: str) -> Parameter:
 class Effect:
     """One candidate effect.
 
-    **Fields:** ``name`` (DESIGN.md section 5); ``meaning``; ``kind`` ``"physics"``, ``"noise"`` or
+    **Fields:** ``name``; ``meaning``; ``kind`` ``"physics"``, ``"noise"`` or
     ``"flexible"`` (describes structure, never named);
     ``params`` the parameters it frees; ``off`` name -> value at which it changes nothing (the others of
     ``params`` are held at ``hold`` while inactive); ``start`` name -> weak but non-zero value its screening
@@ -261,7 +261,7 @@ _LIST = (
 
 #: name -> :class:`Effect`, every candidate the workflow screens.
 LIBRARY: MappingProxyType = MappingProxyType({e.name: e for e in _LIST})
-#: The DESIGN.md section 5 physics effects.
+#: The physics effects (elements of the muscle model).
 PHYSICS_EFFECTS: tuple[str, ...] = tuple(e.name for e in _LIST if e.kind == "physics")
 #: Noise-side alternatives: never reported as physics.
 NOISE_EFFECTS: tuple[str, ...] = tuple(e.name for e in _LIST if e.kind == "noise")
@@ -274,7 +274,7 @@ WIDENING_NOISE: tuple[str, ...] = ("heteroscedastic_noise",)
 assert set(WIDENING_NOISE) <= set(NOISE_EFFECTS)
 
 #: Pairs the rig's four tests cannot always tell apart, and the experiment that separates them
-#: (research/DISCREPANCY.md section 2). An ``ambiguous`` verdict names one of these.
+#: An ``ambiguous`` verdict names one of these.
 CONFUSABLE: MappingProxyType = MappingProxyType(
     {
         frozenset({"hysteresis", "viscoelastic_relaxation"}): "load cycles at two or more strain rates: "

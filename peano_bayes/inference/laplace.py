@@ -1,8 +1,8 @@
 """The posterior's mode and a Laplace approximation around it: where the sampler's walkers start.
 
 The least-squares fit (:mod:`.fit`) weights residuals with fixed noise scales and has no specimen contrasts,
-so its point is not the posterior's mode: on the bundled TP data the log posterior there was 2041 against
-6745 at the mode, and walkers started around it spent hundreds of steps climbing (the noise scales alone sat
+so its point is not the posterior's mode: on the bundled TP data the log posterior there is 2041 against
+6745 at the mode, and walkers started around it spend hundreds of steps climbing (the noise scales alone sit
 at 2-4 times their posterior values). :func:`posterior_mode` therefore polishes the start with BFGS (scipy)
 on the negative log posterior over the whole theta (noise scales, pooling scale and contrasts included),
 then takes the covariance as the inverse Hessian, by central differences of the JAX gradient. One compiled

@@ -18,7 +18,7 @@ sd, on virtual-rig data.) The step response is not binned by default (its dynami
 **Driving inputs (errors in variables):** before binning, the measured inputs that drive a simulation
 (:data:`DRIVING_INPUTS`) are replaced by their piecewise-linear least-squares fit (ramps, holds and steps, see
 :mod:`~peano_bayes.inference.denoise`). Raw, their sensor noise is amplified by the model's sensitivity: on the
-bundled TP data at the true parameters, stroke and step residuals were 14 and 21 times the strain noise, and
+bundled TP data at the true parameters, stroke and step residuals are 14 and 21 times the strain noise, and
 1.0 times with the fitted inputs.
 """
 

@@ -16,7 +16,7 @@
     low = 5e2
     high = 1e5
     unit = "N/m"                            # must equal PARAMETERS[name].unit
-    provenance = "PHYSICS.md §7 critical prior check"
+    provenance = "wide: spans film and textile muscles"
 
 Distributions and their fields (``low``/``high`` give the support; for the unbounded families they truncate):
 

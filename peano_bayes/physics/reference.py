@@ -6,9 +6,8 @@ its material properties on its static and dynamic behavior*, Smart Mater. Struct
 - **Sarosi's empirical model** (eqs 1-10, coefficients in Table 1): upper (loading) and lower (unloading)
   static force curves, Lehr damping ratio from the area between them, and the dynamic step model
   ``m y'' = F_u(p, eps) - B(p, eps) y' - m g``.
-- **Veale's force-balance model** (Table 2; equations as reconstructed in the project's research notes,
-  ``PHYSICS.md`` section 1.2): a toggle linkage per tube, a parallel bending element and a series tensile
-  element.
+- **Veale's force-balance model** (Table 2; equations as reconstructed for this package): a toggle linkage per tube,
+  a parallel bending element and a series tensile element.
 
 Units are SI throughout: pressure [Pa], strain [-] (contraction positive, a fraction, not %), force [N],
 length [m], time [s]. Model parameters are pytrees of arrays (:class:`SarosiCoefficients`,

@@ -14,12 +14,16 @@ which runs the rule touches, not what they would end as.
 from __future__ import annotations
 
 import json
+import sys
 from collections import Counter
 from pathlib import Path
 
 from peano_bayes.discovery.workflow import Gates
 
 RUN = Path(__file__).resolve().parents[1]
+
+sys.path.insert(0, str(RUN.parent))
+from discrepancy_benchmark import log_rows, run_logs  # noqa: E402
 
 
 def refused_steps(rows: list[dict], min_signature: float = Gates.min_signature) -> list[tuple]:
@@ -41,7 +45,7 @@ def refused_steps(rows: list[dict], min_signature: float = Gates.min_signature) 
 
 
 def main() -> None:
-    rows = [json.loads(line) for path in sorted(RUN.glob("runs-*.jsonl")) for line in path.open()]
+    rows = [row for log in run_logs(RUN) for row in log_rows(log)]
     steps = refused_steps(rows)
     print("hidden case | seed | accepted effect | T_after/T_before | run scored right")
     for step in steps:
