@@ -1,9 +1,10 @@
 """The inference pipeline of one dataset, and of the bundled eight: rig file -> fit -> sample -> results.
 
 :func:`infer` is what ``peano-bayes fit`` runs; :func:`run_bundled` is ``peano-bayes run``. Output layout
-(DESIGN.md §4): ``OUT/<code>/posterior.nc``, ``OUT/<code>/summary.json``, and ``OUT/index.md`` for a run.
-While sampling, ``OUT/<code>/sampler_state.npz`` holds every finished chunk and ``fit.json`` the least-squares
-start; ``resume=True`` continues from them.
+of one fit: ``OUT/<label>/posterior.nc`` (arviz), ``summary.json``, ``fit.json`` (the least-squares start) and
+``figures/``; a run adds ``metrics.json`` per material and ``OUT/index.md``, ``ranking.*`` and ``figures/``.
+While sampling, ``sampler_state.npz`` holds every finished chunk (kept when the chain ends unconverged);
+``resume=True`` continues from it.
 """
 
 from __future__ import annotations
@@ -154,6 +155,7 @@ def infer(
     sample_all: bool = False,
     prior: str | Path | None = None,
     label: str | None = None,
+    figures: bool = True,
     log=print,
 ) -> dict:
     """Fit, sample and write the results of one dataset into ``out_dir/<label>/``; return the summary.
@@ -161,7 +163,8 @@ def infer(
     ``data``: a rig file (CSV with its TOML sidecar) or a :class:`Dataset`. ``prior``: a prior file (which may
     ``extends`` a bundled one) or a material code; default: the bundled prior of the dataset's material code.
     ``label``: the result folder's name; default: the data file's stem (``TP`` for the bundled ``TP.csv``), so
-    two datasets of one material do not overwrite each other. ``tests``: which tests to fit
+    two datasets of one material do not overwrite each other. ``figures``: also draw the data over the
+    posterior predictive (and the corner plot) into ``figures/``. ``tests``: which tests to fit
     (default :data:`DEFAULT_TESTS`). The least-squares point is polished to the posterior mode
     (:func:`~peano_bayes.inference.laplace.posterior_mode`); sampling runs ``warmup`` steps of warm-up, then
     chunks of ``chunk`` steps until converged or ``max_steps`` (see
@@ -277,6 +280,11 @@ def infer(
     else:  # kept: a resumed run with a larger step limit continues the same chain
         log(f"{code}: sampler state kept in {state_path}: --resume with a larger --max-steps continues it")
     log(f"{code}: wrote {out / 'posterior.nc'} and summary.json")
+    if figures:
+        from .figures import material_figures
+
+        material_figures(out, dataset)
+        log(f"{code}: figures in {out / 'figures'}")
     return summary
 
 
