@@ -380,12 +380,11 @@ def prior_command(args):
 
 
 def _prior_arguments(p):
-    sub = p.add_subparsers(dest="action", required=True, metavar="ACTION")
-    new = sub.add_parser("new", help="write a starting prior that extends a bundled material's prior")
-    new.add_argument("--like", required=True, metavar="CODE", help=f"start from: {' '.join(bundled.MATERIALS)}")
-    new.add_argument("--out", required=True, metavar="FILE.toml", help="the prior file to write")
-    new.add_argument("--material", default=None, metavar="CODE", help="meta.material (default: the file's stem)")
-    new.add_argument("--force", action="store_true", help="overwrite an existing file")
+    p.add_argument("action", choices=("new",), help="new: write a starting prior that extends a bundled one")
+    p.add_argument("--like", required=True, metavar="CODE", help=f"start from: {' '.join(bundled.MATERIALS)}")
+    p.add_argument("--out", required=True, metavar="FILE.toml", help="the prior file to write")
+    p.add_argument("--material", default=None, metavar="CODE", help="meta.material (default: the file's stem)")
+    p.add_argument("--force", action="store_true", help="overwrite an existing file")
 
 
 prior_command.arguments = _prior_arguments

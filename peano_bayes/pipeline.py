@@ -178,7 +178,7 @@ def infer(
     code = dataset.material.code
     prior = _prior_of(dataset, prior)
     config = prior.config
-    out = Path(out_dir) / _check_label(label or _default_label(dataset))
+    out = Path(out_dir) / _check_label(_default_label(dataset) if label is None else label)
     out.mkdir(parents=True, exist_ok=True)
     observations = prepare(dataset)
     posterior = build_posterior(observations, prior, config=config, held=() if sample_all else DEFAULT_HELD)

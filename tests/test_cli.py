@@ -1,0 +1,145 @@
+"""Command-line conventions: --help and --version without JAX, --json keeps stdout to one JSON object, --quiet,
+the exit status of each outcome (0, 1, 2, 3, 130), a prior of one's own (prior new, fit --prior, --label)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+import peano_bayes
+from peano_bayes import bundled, pipeline
+from peano_bayes.cli import main
+from peano_bayes.commands import COMMANDS
+from peano_bayes.data import load, save
+from peano_bayes.errors import PeanoBayesInputError
+from peano_bayes.inference.priors import load_prior
+from peano_bayes.rig import RigSimulationError
+
+
+def test_help_of_every_command_and_version_import_no_jax():
+    script = (
+        "import sys, contextlib, io\n"
+        "from peano_bayes.cli import build_parser\n"
+        "from peano_bayes.commands import COMMANDS\n"
+        "parser = build_parser()\n"
+        "for argv in (['--help'], ['--version'], *[[name, '--help'] for name in COMMANDS], ['prior', '-h']):\n"
+        "    with contextlib.redirect_stdout(io.StringIO()), contextlib.suppress(SystemExit):\n"
+        "        parser.parse_args(argv)\n"
+        "print(sorted(m for m in sys.modules if m == 'jax' or m.startswith('jax.')))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"
+
+
+def test_version(capsys):
+    with pytest.raises(SystemExit) as stop:
+        main(["--version"])
+    assert stop.value.code == 0
+    assert capsys.readouterr().out.strip() == f"peano-bayes {peano_bayes.__version__}"
+
+
+def test_json_output_is_the_only_thing_on_stdout(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # a bundled code resolves from anywhere
+    assert main(["check", "TP", "--json"]) == 0
+    captured = capsys.readouterr()
+    report = json.loads(captured.out)  # the whole of stdout is one JSON object
+    assert report["file"] == str(bundled.dataset_path("TP"))
+    assert "TP (60 um LDPE) - valid" in captured.err  # the human summary went to stderr
+
+
+def test_quiet_prints_nothing_on_success(capsys):
+    assert main(["check", "TP", "--quiet"]) == 0
+    assert capsys.readouterr().out == ""
+
+
+@pytest.fixture
+def own_muscle(tmp_path):
+    """A small rig file of a material code with no bundled prior ("VM"): two of TPC's load cycles."""
+    import dataclasses
+
+    data = load(bundled.dataset_path("TPC"))
+    runs = tuple(r for r in data.runs if r.test == "load_cycle")[:2]
+    relabelled = dataclasses.replace(data, runs=runs, material=dataclasses.replace(data.material, code="VM"))
+    return save(relabelled, tmp_path / "VM_first.csv")
+
+
+def test_fit_of_an_unknown_material_without_a_prior_names_the_option(own_muscle, tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["fit", str(own_muscle), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "'VM'" in err and "--prior FILE.toml" in err and "prior new --like" in err
+    assert "Traceback" not in err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("label", ["../escape", "a/b", "", " padded"])
+def test_a_label_that_is_not_a_folder_name_is_bad_input(own_muscle, tmp_path, capsys, label):
+    out = tmp_path / "out"
+    argv = ["fit", str(own_muscle), "--out", str(out), "--prior", "TPC", "--label", label]
+    assert main(argv) == 2
+    assert "--label" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_prior_new_writes_the_like_materials_prior_to_edit(tmp_path, capsys):
+    path = tmp_path / "VM.toml"
+    assert main(["prior", "new", "--like", "TPC", "--out", str(path), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["material"] == "VM"  # from the file's stem
+    written, like = load_prior(path), load_prior("TPC")
+    assert written.names == like.names
+    assert written.config == like.config
+    assert all(dict(written.marginals[n].spec) == dict(like.marginals[n].spec) for n in like.names)
+    assert written.files[-1] == path and written.files[-2] == like.files[-1]  # it extends TPC's own file
+    # An existing file is not overwritten, and a bad code writes nothing.
+    before = path.read_text()
+    assert main(["prior", "new", "--like", "TPC", "--out", str(path)]) == 2
+    assert path.read_text() == before
+    assert main(["prior", "new", "--like", "XX", "--out", str(tmp_path / "x.toml")]) == 2
+    assert not (tmp_path / "x.toml").exists()
+    assert main(["prior", "new", "--like", "TPC", "--out", str(tmp_path / "x.txt")]) == 2
+
+
+def _fake_infer(outcome):
+    def infer(data, out_dir, **kwargs):
+        if isinstance(outcome, BaseException):
+            raise outcome
+        conv = {"converged": outcome, "problems": [] if outcome else ["R-hat misses its target"], "rhat": {"a": 1.0},
+                "ess_bulk": {"a": 2000.0}}
+        return {"material": data.material.code, "label": kwargs.get("label") or "VM_first", "convergence": conv,
+                "steps": 40, "timings_s": {}, "prior": kwargs.get("prior")}
+
+    return infer
+
+
+@pytest.mark.parametrize(
+    "outcome, status",
+    [
+        (True, 0),
+        (False, 3),  # finished, not converged
+        (RigSimulationError("the solver missed its tolerance"), 1),  # a computation failed, not the input
+        (KeyboardInterrupt(), 130),
+        (PeanoBayesInputError("bad thing"), 2),
+    ],
+)
+def test_exit_status_of_each_outcome(own_muscle, tmp_path, capsys, monkeypatch, outcome, status):
+    monkeypatch.setattr(pipeline, "infer", _fake_infer(outcome))
+    argv = ["fit", str(own_muscle), "--out", str(tmp_path / "out"), "--prior", "TPC", "--json"]
+    assert main(argv) == status
+    captured = capsys.readouterr()
+    if status in (0, 3):
+        report = json.loads(captured.out)
+        assert report["converged"] is (status == 0) and report["label"] == "VM_first"
+    else:
+        assert captured.out == ""
+        assert "Traceback" not in captured.err
+
+
+def test_every_command_is_registered_once_with_help():
+    assert {"demo", "check", "simulate", "fit", "run", "prior", "metrics", "rank", "recommend", "discover"} <= set(
+        COMMANDS
+    )
+    assert all(c.help for c in COMMANDS.values())
