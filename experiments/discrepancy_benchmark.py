@@ -41,7 +41,6 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
-import os
 import shutil
 import subprocess
 import sys
@@ -52,6 +51,7 @@ import numpy as np
 import pandas as pd
 
 from peano_bayes import enable_compilation_cache
+from peano_bayes.atomic import write_text
 from peano_bayes.discovery.harness import HIDEABLE, NOT_HIDEABLE, Case, strength_for_snr
 from peano_bayes.inference.calibration import wilson_interval
 
@@ -109,9 +109,7 @@ def _calibrate(out: Path, all_cases) -> dict:
             if name not in strengths:
                 strengths[name] = strength_for_snr(e, case.snr)
                 print(f"calibrated {name}: strength factor {strengths[name]:.4g}", flush=True)
-                tmp = path.with_suffix(".tmp")
-                tmp.write_text(json.dumps(strengths, indent=1))
-                os.replace(tmp, path)
+                write_text(path, json.dumps(strengths, indent=1))
     return strengths
 
 

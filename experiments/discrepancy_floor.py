@@ -32,6 +32,7 @@ import numpy as np
 import pandas as pd
 
 from peano_bayes import enable_compilation_cache
+from peano_bayes.atomic import write_text
 from peano_bayes.discovery import discovery_data
 from peano_bayes.discovery.data import DISCOVERY_BIN_SIZES
 from peano_bayes.discovery.fitting import evaluate, fit_models
@@ -43,7 +44,6 @@ from peano_bayes.discovery.harness import (
     reference_sigma,
     true_model,
 )
-from peano_bayes.inference.results import write_atomic_text
 from peano_bayes.rig import RigNoise
 
 HERE = Path(__file__).resolve().parent
@@ -114,7 +114,7 @@ def main(argv=None) -> int:
         rows += floor_rows(args.effect, strength, args.shrink, args.seed, bins, sizes, pressure_sd_pa)
     table = pd.DataFrame(rows)
     name = args.effect + (f"-pressure{args.shrink_pressure:g}" if args.shrink_pressure != 1.0 else "")
-    write_atomic_text(out / f"floor-{name}.csv", table.to_csv(index=False, float_format="%.4g"))
+    write_text(out / f"floor-{name}.csv", table.to_csv(index=False, float_format="%.4g"))
     lines = [
         f"# Model-error floor of base + {args.effect} (SNR 2), by test and pressure",
         "",
@@ -128,7 +128,7 @@ def main(argv=None) -> int:
     ]
     for r in table.itertuples():
         lines.append(f"| {r.bins} | {r.test} | {r.pressure_kpa} | {r.n_bins} | {r.rms:.3f} | {r.mean:+.3f} |")
-    write_atomic_text(out / f"FLOOR-{name}.md", "\n".join(lines) + "\n")
+    write_text(out / f"FLOOR-{name}.md", "\n".join(lines) + "\n")
     print("\n".join(lines))
     overall = table[table.pressure_kpa == "all"]
     print(json.dumps({f"{r.bins}/{r.test}": round(r.rms, 3) for r in overall.itertuples()}))

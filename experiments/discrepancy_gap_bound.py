@@ -38,10 +38,10 @@ import numpy as np
 import pandas as pd
 
 from peano_bayes import enable_compilation_cache
+from peano_bayes.atomic import write_text
 from peano_bayes.discovery import discovery_data
 from peano_bayes.discovery.harness import HIDEABLE, REFERENCE_FORCE_SD_N, Case, hidden_dataset
 from peano_bayes.discovery.harness import reference_sigma as per_sample_sigma
-from peano_bayes.inference.results import write_atomic_text
 
 HERE = Path(__file__).resolve().parent
 #: Noise of the "noise-free" simulations [N] (discovery_data needs some noise to estimate; 1e-6 of the rig's).
@@ -101,7 +101,7 @@ def main(argv=None) -> int:
         rows += bound_rows(effect, strengths[f"{effect}@{args.snr:g}"], args.seed, without)
         print(f"{effect}: smallest bound {min(r['bound'] for r in rows if r['effect'] == effect):.2f}", flush=True)
     table = pd.DataFrame(rows)
-    write_atomic_text(out / "gap_bound.csv", table.to_csv(index=False, float_format="%.4g"))
+    write_text(out / "gap_bound.csv", table.to_csv(index=False, float_format="%.4g"))
     best = table.loc[table.groupby("effect")["bound"].idxmin()]
     lines = [
         f"# Lower bound of the held-out gap ratio at SNR {args.snr:g}",
@@ -118,7 +118,7 @@ def main(argv=None) -> int:
         lines.append(
             f"| {r.effect} | {r.test} | {r.signal:.3g} | {r.signal_fit:.3g} | {r.bin_noise:.3g} | {r.bound:.2f} |"
         )
-    write_atomic_text(out / "GAP_BOUND.md", "\n".join(lines) + "\n")
+    write_text(out / "GAP_BOUND.md", "\n".join(lines) + "\n")
     print("\n".join(lines))
     print(json.dumps({r.effect: round(float(r.bound), 3) for r in best.itertuples()}))
     return 0

@@ -42,6 +42,7 @@ import numpy as np
 import pandas as pd
 
 from peano_bayes import enable_compilation_cache
+from peano_bayes.atomic import write_text
 from peano_bayes.discovery import discovery_data
 from peano_bayes.discovery.fitting import evaluate, fit_models
 from peano_bayes.discovery.harness import (
@@ -55,7 +56,6 @@ from peano_bayes.discovery.harness import (
 )
 from peano_bayes.discovery.model import DEFAULT_BASE
 from peano_bayes.discovery.workflow import fit_base
-from peano_bayes.inference.results import write_atomic_text
 
 HERE = Path(__file__).resolve().parent
 
@@ -136,7 +136,7 @@ def main(argv=None) -> int:
     table = pd.DataFrame(rows)
     out = run / "checks" / ("refit_bound" if args.snr == 2.0 else f"refit_bound_snr{args.snr:g}")
     out.mkdir(parents=True, exist_ok=True)
-    write_atomic_text(out / "refit_bound.csv", table.to_csv(index=False, float_format="%.4g"))
+    write_text(out / "refit_bound.csv", table.to_csv(index=False, float_format="%.4g"))
     smallest = table.loc[table.groupby(["effect", "seed"])["expected_ratio"].idxmin()]
     per_effect = smallest.groupby("effect")["expected_ratio"].agg(["median", "min", "max"])
     observed = observed_ratios(run, args.snr).groupby("effect")["ratio"]
@@ -160,7 +160,7 @@ def main(argv=None) -> int:
         met = f"{int(s.met)}/{int(s.n)}" if s is not None else "-"
         med = f"{s['median']:.2f}" if s is not None else "-"
         lines.append(f"| {effect} | {r['median']:.2f} | {r['min']:.2f}-{r['max']:.2f} | {met} | {med} |")
-    write_atomic_text(out / "REFIT_BOUND.md", "\n".join(lines) + "\n")
+    write_text(out / "REFIT_BOUND.md", "\n".join(lines) + "\n")
     print("\n".join(lines))
     summary = {
         e: {

@@ -32,9 +32,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from peano_bayes.atomic import write_text
 from peano_bayes.discovery.effects import PHYSICS_EFFECTS
 from peano_bayes.inference.calibration import wilson_interval
-from peano_bayes.inference.results import write_atomic_text
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from discrepancy_benchmark import markdown  # noqa: E402
@@ -161,8 +161,8 @@ def main(argv=None) -> int:
     runs = load_runs(out)
     roc = pd.DataFrame(roc_rows(runs))
     gates = pd.DataFrame(gate_rows(runs))
-    write_atomic_text(out / "tradeoff.csv", roc.to_csv(index=False, float_format="%.4g"))
-    write_atomic_text(out / "tradeoff_gates.csv", gates.to_csv(index=False, float_format="%.4g"))
+    write_text(out / "tradeoff.csv", roc.to_csv(index=False, float_format="%.4g"))
+    write_text(out / "tradeoff_gates.csv", gates.to_csv(index=False, float_format="%.4g"))
     best = roc.sort_values("recall_at_fp_target", ascending=False).drop_duplicates(["effect", "snr"])
     best = best.sort_values(["effect", "snr"])
     cheapest = roc.sort_values("fp_rate_at_recall_target").drop_duplicates(["effect", "snr"])
@@ -203,7 +203,7 @@ def main(argv=None) -> int:
         "",
         "Every gate dropped in turn: `tradeoff_gates.csv`; every statistic: `tradeoff.csv`.",
     ]
-    write_atomic_text(out / "TRADEOFF.md", "\n".join(text) + "\n")
+    write_text(out / "TRADEOFF.md", "\n".join(text) + "\n")
     print("\n".join(text))
     summary = {
         f"{r.effect}@{r.snr:g}": {

@@ -26,6 +26,7 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
+from peano_bayes.atomic import write_text
 from peano_bayes.inference.calibration import (
     LEVELS,
     RANK_DRAWS,
@@ -33,7 +34,6 @@ from peano_bayes.inference.calibration import (
     coverage_table,
     run_replicate,
 )
-from peano_bayes.inference.results import write_atomic_text
 
 TARGET = (0.85, 0.95)
 
@@ -137,8 +137,8 @@ def main(argv=None) -> int:
     rows = coverage_table(replicates, names)
     seconds = time.perf_counter() - t0 + sum(r["seconds"] for r in replicates if r["index"] not in todo)
     flat = [{k: (json.dumps(v) if isinstance(v, list) else v) for k, v in row.items()} for row in rows]
-    write_atomic_text(args.out / "coverage.csv", pd.DataFrame(flat).to_csv(index=False))
-    write_atomic_text(args.out / "SBC.md", markdown(rows, replicates, args.seed, seconds, args.exact_inputs))
+    write_text(args.out / "coverage.csv", pd.DataFrame(flat).to_csv(index=False))
+    write_text(args.out / "SBC.md", markdown(rows, replicates, args.seed, seconds, args.exact_inputs))
     rank_figure(replicates, names, args.out / "ranks")
     print((args.out / "SBC.md").read_text())
     summary = {

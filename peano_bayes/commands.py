@@ -319,7 +319,7 @@ metrics_command.arguments = _metrics_arguments
 def rank_command(args):
     from pathlib import Path
 
-    from .inference.results import write_atomic_text
+    from .atomic import write_text
     from .metrics import read_metrics
     from .ranking import rank_materials, ranking_markdown
 
@@ -335,8 +335,8 @@ def rank_command(args):
     out = Path(args.out) if args.out else Path(args.results[0]).resolve().parent
     out.mkdir(parents=True, exist_ok=True)
     text = ranking_markdown(report)
-    write_atomic_text(out / "ranking.json", json.dumps(report, indent=1))
-    write_atomic_text(out / "ranking.md", "# Ranking\n\n" + text + "\n")
+    write_text(out / "ranking.json", json.dumps(report, indent=1))
+    write_text(out / "ranking.md", "# Ranking\n\n" + text + "\n")
     print(text)
     print(f"wrote {out / 'ranking.json'} and {out / 'ranking.md'}")
     return report
@@ -356,8 +356,8 @@ rank_command.arguments = _rank_arguments
 def recommend_command(args):
     from pathlib import Path
 
+    from .atomic import write_text
     from .figures import recommendation_figure
-    from .inference.results import write_atomic_text
     from .recommend import recommend, recommendation_markdown
 
     report = recommend(args.spec, args.results)  # validates the spec and every result before writing
@@ -366,8 +366,8 @@ def recommend_command(args):
     out.mkdir(parents=True, exist_ok=True)
     stem = out / f"{spec.stem}_recommendation"
     text = recommendation_markdown(report)
-    write_atomic_text(stem.with_suffix(".json"), json.dumps(report, indent=1))
-    write_atomic_text(stem.with_suffix(".md"), f"# Recommendation for {spec.name}\n\n{text}\n")
+    write_text(stem.with_suffix(".json"), json.dumps(report, indent=1))
+    write_text(stem.with_suffix(".md"), f"# Recommendation for {spec.name}\n\n{text}\n")
     recommendation_figure(report, stem)
     print(text)
     print(f"wrote {stem}.json, .md, .png and .pdf")

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
 from pathlib import Path
 
 import arviz as az
@@ -23,6 +22,7 @@ import matplotlib.ticker
 import numpy as np
 
 from . import plots
+from .atomic import replacing
 from .inference.likelihood import NOISE_PARAMETERS, predict, prepare
 from .metrics import METRIC_UNITS
 
@@ -37,9 +37,8 @@ def save(fig, path_stem: Path) -> list[Path]:
     written = []
     for ext in ("png", "pdf"):
         final = path_stem.with_suffix(f".{ext}")
-        tmp = final.with_name(f".{final.name}.tmp")
-        fig.savefig(tmp, format=ext, bbox_inches="tight")
-        os.replace(tmp, final)
+        with replacing(final) as tmp:
+            fig.savefig(tmp, format=ext, bbox_inches="tight")
         written.append(final)
     plt.close(fig)
     return written

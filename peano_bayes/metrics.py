@@ -367,7 +367,7 @@ def evaluate_result(
     (:func:`compare_published`) and ``draws`` (metric -> list of values, for :mod:`peano_bayes.ranking`)."""
     from tqdm.auto import tqdm
 
-    from .inference.results import write_atomic_text
+    from .atomic import write_text
 
     idata = load_result(path)
     total = idata.posterior.sizes["chain"] * idata.posterior.sizes["draw"]
@@ -387,7 +387,7 @@ def evaluate_result(
         "draws": {name: [float(x) for x in values] for name, values in result.draws.items()},
     }
     directory = Path(path) if Path(path).is_dir() else Path(path).parent
-    write_atomic_text(directory / "metrics.json", json.dumps(out, indent=1, default=float))
+    write_text(directory / "metrics.json", json.dumps(out, indent=1, default=float))
     return out
 
 

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from . import bundled
+from .atomic import write_text
 from .data import Dataset, load
 from .errors import PeanoBayesInputError
 from .inference.fit import fit, fit_quality
@@ -27,7 +28,6 @@ from .inference.priors import prior_for
 from .inference.results import (
     parameter_table,
     to_inference_data,
-    write_atomic_text,
     write_netcdf,
 )
 from .inference.sample import DEFAULT_MAX_STEPS, sample, walker_count
@@ -158,7 +158,7 @@ def infer(
             stale.unlink(missing_ok=True)
         log(f"{code}: least squares from {n_starts} starts ...")
         fitted = least_squares(posterior, prior, n_starts=n_starts, seed=seed)
-        write_atomic_text(fit_path, json.dumps(fitted, indent=1))
+        write_text(fit_path, json.dumps(fitted, indent=1))
         timings["least_squares_s"] = fitted["seconds"]
         log(
             f"{code}: least squares done in {fitted['seconds']:.1f} s "
@@ -230,7 +230,7 @@ def infer(
         "timings_s": timings,
     }
     write_netcdf(idata, out / "posterior.nc")
-    write_atomic_text(out / "summary.json", json.dumps(summary, indent=1, default=float))
+    write_text(out / "summary.json", json.dumps(summary, indent=1, default=float))
     if result.convergence.converged:
         state_path.unlink(missing_ok=True)
     else:  # kept: a resumed run with a larger step limit continues the same chain
@@ -359,7 +359,7 @@ def reference_models(directory: Path, summary: dict, *, log=print) -> dict | Non
         return None
     log(f"{summary['material']}: fitting the reference models to the load cycles ...")
     comparison = reference_comparison(prepare(_select_tests(load(source), ["load_cycle"])))
-    write_atomic_text(path, json.dumps(comparison, indent=1))
+    write_text(path, json.dumps(comparison, indent=1))
     return comparison
 
 
@@ -392,11 +392,11 @@ def report_results(out_dir: str | Path, materials=BUNDLED_MATERIALS, *, n_draws:
     prior_only = {name for m in metrics.values() for name, s in m["summary"].items() if s["from_prior"]}
     ranking = rank_materials({c: m["draws"] for c, m in metrics.items()}, from_prior=prior_only) if metrics else None
     if ranking:
-        write_atomic_text(out_dir / "ranking.json", json.dumps(ranking, indent=1))
-        write_atomic_text(out_dir / "ranking.md", "# Ranking\n\n" + ranking_markdown(ranking) + "\n")
+        write_text(out_dir / "ranking.json", json.dumps(ranking, indent=1))
+        write_text(out_dir / "ranking.md", "# Ranking\n\n" + ranking_markdown(ranking) + "\n")
         cross_material_figures(out_dir, results, metrics, ranking)
     steps = {c: (out_dir / c / "figures" / "step.png").exists() for c in finished}
-    write_atomic_text(out_dir / "index.md", index_markdown(summaries, metrics, ranking, references, steps))
+    write_text(out_dir / "index.md", index_markdown(summaries, metrics, ranking, references, steps))
     log(f"wrote {out_dir / 'index.md'}")
     return ranking or {}
 
@@ -442,7 +442,7 @@ def run_bundled(
 
     def finished(code, summary):
         summaries[code] = summary
-        write_atomic_text(out_dir / "index.md", index_markdown([summaries[c] for c in materials if c in summaries]))
+        write_text(out_dir / "index.md", index_markdown([summaries[c] for c in materials if c in summaries]))
 
     if jobs <= 1 or len(todo) <= 1:
         for code in todo:

@@ -10,8 +10,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from .. import plots
+from ..atomic import write_text
 from ..figures import save
-from ..inference.results import write_atomic_text
 from .effects import ABSORBS, CONFUSABLE, LIBRARY
 
 _UNIT = {"load_cycle": "N", "blocking": "N", "stroke": "-", "step": "-"}
@@ -203,8 +203,8 @@ def write_report(result, out: Path) -> list[Path]:
     """Write ``report.json``, ``report.md`` and ``figures/residuals.{png,pdf}`` into ``out`` (each atomic)."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    write_atomic_text(out / "report.json", json.dumps(result.report, indent=1, default=float))
-    write_atomic_text(out / "report.md", report_markdown(result.report))
+    write_text(out / "report.json", json.dumps(result.report, indent=1, default=float))
+    write_text(out / "report.md", report_markdown(result.report))
     return [out / "report.json", out / "report.md", *residual_figure(result, out / "figures" / "residuals")]
 
 

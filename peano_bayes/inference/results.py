@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
 from importlib import metadata
 from pathlib import Path
 
@@ -22,6 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..atomic import replacing
 from .likelihood import group_log_likelihood
 from .posterior import Posterior
 from .sample import SampleResult
@@ -146,16 +146,10 @@ def _attrs(posterior: Posterior, result: SampleResult, seed: int, extra: dict | 
     }
 
 
-def write_atomic_text(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-
-
 def write_netcdf(idata, path: Path) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    idata.to_netcdf(str(tmp))
-    os.replace(tmp, path)
+    """Write ``idata`` to ``path`` as NetCDF, atomically (:func:`peano_bayes.atomic.replacing`)."""
+    with replacing(path) as tmp:
+        idata.to_netcdf(str(tmp))
 
 
 def parameter_table(idata, names, hdi_prob: float = 0.94) -> dict:
@@ -179,6 +173,5 @@ __all__ = [
     "parameter_table",
     "physical_draws",
     "to_inference_data",
-    "write_atomic_text",
     "write_netcdf",
 ]
