@@ -43,6 +43,7 @@ from scipy.signal import savgol_filter
 
 from . import bundled
 from .errors import PeanoBayesInputError
+from .formatting import format_number
 from .inference.posterior import STEP_ONLY_PARAMETERS
 from .inference.priors import prior_for
 from .physics import DEFAULT_CONFIG, PAPER_GEOMETRY, Geometry, LoadCycle, ModelConfig, simulate_load_cycle
@@ -335,10 +336,6 @@ def load_result(path: str | Path):
     return idata
 
 
-def _fmt(x: float) -> str:
-    return f"{x:.3g}" if math.isfinite(x) else "n/a"
-
-
 def metrics_markdown(material: str, summary: dict, comparison: list[dict]) -> str:
     """A markdown table of a material's posterior metrics with the published values beside them."""
     published = {row["metric"]: row for row in comparison}
@@ -352,8 +349,8 @@ def metrics_markdown(material: str, summary: dict, comparison: list[dict]) -> st
         inside = "-" if not row or row["inside"] is None else ("yes" if row["inside"] else "**no**")
         flag = " (prior: step not fitted)" if s["from_prior"] else ""
         lines.append(
-            f"| {name}{flag} | {s['unit']} | {_fmt(s['median'])} | {_fmt(s['hdi_low'])} to {_fmt(s['hdi_high'])} "
-            f"| {pub} | {inside} |"
+            f"| {name}{flag} | {s['unit']} | {format_number(s['median'])} | "
+            f"{format_number(s['hdi_low'])} to {format_number(s['hdi_high'])} | {pub} | {inside} |"
         )
     return "\n".join(lines)
 

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 import time
 from pathlib import Path
 
@@ -20,6 +19,7 @@ from . import bundled
 from .atomic import write_text
 from .data import Dataset, load
 from .errors import PeanoBayesInputError
+from .formatting import format_number
 from .inference.fit import fit, fit_quality
 from .inference.laplace import posterior_mode
 from .inference.likelihood import prepare
@@ -239,10 +239,6 @@ def infer(
     return summary
 
 
-def _fmt(x: float) -> str:
-    return f"{x:.3g}" if math.isfinite(x) else str(x)
-
-
 def index_markdown(
     summaries: list[dict],
     metrics: dict | None = None,
@@ -276,14 +272,16 @@ def index_markdown(
         ]
         for name, row in s["parameters"].items():
             lines.append(
-                f"| {name} | {s['units'].get(name, '')} | {_fmt(row['mean'])} | "
-                f"{_fmt(row['hdi_low'])} to {_fmt(row['hdi_high'])} | {conv['rhat'][name]:.3f} | "
-                f"{conv['ess_bulk'][name]:.0f} |"
+                f"| {name} | {s['units'].get(name, '')} | {format_number(row['mean'], nonfinite=None)} | "
+                f"{format_number(row['hdi_low'], nonfinite=None)} to "
+                f"{format_number(row['hdi_high'], nonfinite=None)} | "
+                f"{conv['rhat'][name]:.3f} | {conv['ess_bulk'][name]:.0f} |"
             )
         lines += ["", "| test | RMSE | max error | R² |", "|---|---|---|---|"]
         for test, q in s["fit_quality_posterior_mean"].items():
             lines.append(
-                f"| {test} | {_fmt(q['rmse'])} {q['unit']} | {_fmt(q['max_error'])} {q['unit']} | {q['r2']:.4f} |"
+                f"| {test} | {format_number(q['rmse'], nonfinite=None)} {q['unit']} | "
+                f"{format_number(q['max_error'], nonfinite=None)} {q['unit']} | {q['r2']:.4f} |"
             )
         reference = (references or {}).get(s["material"])
         ours = s["fit_quality_posterior_mean"].get("load_cycle")
@@ -295,12 +293,15 @@ def index_markdown(
                 "",
                 "| model | RMSE | max error | R² |",
                 "|---|---|---|---|",
-                f"| peano_bayes (posterior mean) | {_fmt(ours['rmse'])} N | {_fmt(ours['max_error'])} N | "
-                f"{ours['r2']:.4f} |",
+                f"| peano_bayes (posterior mean) | {format_number(ours['rmse'], nonfinite=None)} N | "
+                f"{format_number(ours['max_error'], nonfinite=None)} N | {ours['r2']:.4f} |",
             ]
             for name, label in (("sarosi", "Sarosi static, 12 coefficients"), ("veale", "Veale force balance")):
                 q = reference[name]["quality"]
-                lines.append(f"| {label} | {_fmt(q['rmse'])} N | {_fmt(q['max_error'])} N | {q['r2']:.4f} |")
+                lines.append(
+                    f"| {label} | {format_number(q['rmse'], nonfinite=None)} N | "
+                    f"{format_number(q['max_error'], nonfinite=None)} N | {q['r2']:.4f} |"
+                )
         t = s["timings_s"]
         lines += [
             "",
