@@ -91,7 +91,7 @@ def step_band(idata, dataset, n_draws: int = 40) -> dict | None:
     over ``n_draws`` posterior draws: ``time_s``, ``observed``, ``low``, ``median``, ``high`` (94 % of the
     draws, noise-free), ``title`` and ``prior_only`` (parameters drawn from the prior because the fit had no
     step test). ``None`` when the dataset has no step run."""
-    from .metrics import parameter_draws, result_config
+    from .inference.results import parameter_draws, result_config
 
     runs = [r for r in dataset.runs if r.test == "step"]
     if not runs:
@@ -119,7 +119,7 @@ def step_band(idata, dataset, n_draws: int = 40) -> dict | None:
 def material_figures(result_dir: str | Path, dataset=None) -> list[Path]:
     """``predictive`` and ``corner`` figures of one result directory into its ``figures/``; given its
     ``dataset`` with a step run, also ``step`` (:func:`step_band`)."""
-    from .metrics import load_result
+    from .inference.results import load_result
 
     result_dir = Path(result_dir)
     idata = load_result(result_dir)

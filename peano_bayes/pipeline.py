@@ -371,7 +371,8 @@ def report_results(out_dir: str | Path, materials=BUNDLED_MATERIALS, *, n_draws:
     if present) and ``figures/``; across them: ``ranking.json``/``ranking.md``, ``figures/`` and ``index.md``.
     Returns the ranking (:func:`~peano_bayes.ranking.rank_materials`)."""
     from .figures import cross_material_figures, material_figures
-    from .metrics import evaluate_result, load_result, read_metrics
+    from .inference.results import load_result
+    from .metrics import evaluate_result, read_metrics
     from .ranking import rank_materials, ranking_markdown
 
     out_dir = Path(out_dir)
