@@ -1,6 +1,6 @@
 """Validation of `peano-bayes discover` on virtual-rig data with a hidden effect (issue 6).
 
-Cases (peano_bayes.discovery.harness): each hideable library effect at several signal-to-noise ratios; no
+Cases (peano_bayes.validation.discovery_benchmark): each hideable library effect at several signal-to-noise ratios; no
 effect at several noise levels (false positives); slow load-cell drift (outside the library); two effects at
 once. ``--seeds`` seeds per case, starting at ``--first-seed`` (default 10000). Seed history: tuning used 0-9, the
 tests use 100-199, a first final run on 1000-1019 was stopped after 6 runs (non-confusable rivals made verdicts
@@ -52,8 +52,8 @@ import pandas as pd
 
 from peano_bayes import enable_compilation_cache
 from peano_bayes.atomic import write_text
-from peano_bayes.discovery.harness import HIDEABLE, NOT_HIDEABLE, Case, strength_for_snr
-from peano_bayes.inference.calibration import wilson_interval
+from peano_bayes.validation.discovery_benchmark import HIDEABLE, NOT_HIDEABLE, Case, strength_for_snr
+from peano_bayes.validation.sbc import wilson_interval
 
 HERE = Path(__file__).resolve().parent
 TWO_EFFECTS = ("hysteresis", "flow_restriction")
@@ -77,7 +77,7 @@ def key(case: Case, seed: int) -> str:
 def _one(case: Case, seed: int, strengths: dict) -> dict:
     enable_compilation_cache()
     from peano_bayes.discovery import discover, discovery_data
-    from peano_bayes.discovery.harness import hidden_dataset, score
+    from peano_bayes.validation.discovery_benchmark import hidden_dataset, score
 
     start = time.perf_counter()
     dataset = hidden_dataset(case, seed, {e: strengths[e] for e in case.effects})

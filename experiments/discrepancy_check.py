@@ -18,7 +18,7 @@ from pathlib import Path
 
 from peano_bayes import enable_compilation_cache
 from peano_bayes.discovery import discover, discovery_data
-from peano_bayes.discovery.harness import Case, hidden_dataset, score
+from peano_bayes.validation.discovery_benchmark import Case, hidden_dataset, score
 
 HERE = Path(__file__).resolve().parent
 

@@ -36,7 +36,8 @@ from peano_bayes.atomic import write_text
 from peano_bayes.discovery import discovery_data
 from peano_bayes.discovery.data import DISCOVERY_BIN_SIZES
 from peano_bayes.discovery.fitting import evaluate, fit_models
-from peano_bayes.discovery.harness import (
+from peano_bayes.rig import RigNoise
+from peano_bayes.validation.discovery_benchmark import (
     HIDEABLE,
     REFERENCE_FORCE_SD_N,
     Case,
@@ -44,7 +45,6 @@ from peano_bayes.discovery.harness import (
     reference_sigma,
     true_model,
 )
-from peano_bayes.rig import RigNoise
 
 HERE = Path(__file__).resolve().parent
 QUASI_STATIC = ("load_cycle", "blocking", "stroke")

@@ -1,9 +1,9 @@
 """The smallest held-out gap ratio any workflow could reach on the benchmark's data (issue 6, gap target).
 
 The benchmark scores a correct detection by ``RMSE after / before`` on the held-out runs of the test with the
-largest gap before (``peano_bayes.discovery.harness.score``); the target is <= 0.5. Held-out RMSE is measured
-against noisy bin means, so even a perfect model leaves the bins' noise. This script bounds the ratio from below,
-per effect at the benchmark's SNR, from noise-free simulations at equal base parameters:
+largest gap before (``peano_bayes.validation.discovery_benchmark.score``); the target is <= 0.5. Held-out RMSE is
+measured against noisy bin means, so even a perfect model leaves the bins' noise. This script bounds the ratio from
+below, per effect at the benchmark's SNR, from noise-free simulations at equal base parameters:
 
 - ``signal``: RMS over the held-out bins of (with the effect - without it), per test [N or -];
 - ``bin_noise``: RMS of the bin means' noise sd there (the rig's per-sample noise at 0.2 N / sqrt(samples));
@@ -40,8 +40,8 @@ import pandas as pd
 from peano_bayes import enable_compilation_cache
 from peano_bayes.atomic import write_text
 from peano_bayes.discovery import discovery_data
-from peano_bayes.discovery.harness import HIDEABLE, REFERENCE_FORCE_SD_N, Case, hidden_dataset
-from peano_bayes.discovery.harness import reference_sigma as per_sample_sigma
+from peano_bayes.validation.discovery_benchmark import HIDEABLE, REFERENCE_FORCE_SD_N, Case, hidden_dataset
+from peano_bayes.validation.discovery_benchmark import reference_sigma as per_sample_sigma
 
 HERE = Path(__file__).resolve().parent
 #: Noise of the "noise-free" simulations [N] (discovery_data needs some noise to estimate; 1e-6 of the rig's).

@@ -1,14 +1,14 @@
 """How much of each hidden effect the base model can absorb (why some effects are missed at SNR 2, issue 6).
 
-The benchmark's SNR (peano_bayes.discovery.harness) is ``max over tests of RMS(y_with - y_without) / sigma``
-at *equal* base parameters, as research/DISCREPANCY.md section 4 defines it. Discovery, though, sees only what
-is left after the base model (tensile + bending stiffness, free) is refitted: the part of the effect's signal
-the base cannot mimic. This script measures that part. For each hideable effect at the strength the final
-benchmark used for SNR 2 (``experiments/discrepancy-5000/strengths.json``), it simulates the harness's rig data
-with the load-cell noise shrunk ``--shrink`` times (so the fit sees the same relative weights of force and
-strain tests but noise does not blur the misfit), fits the base model from four starts and the base plus the
-hidden effect from the truth, and reports per test the RMS of the binned misfit on the fitted and held-out
-runs, in units of the rig's per-sample noise at 0.2 N (the SNR's sigma):
+The benchmark's SNR (peano_bayes.validation.discovery_benchmark) is ``max over tests of RMS(y_with - y_without) /
+sigma`` at *equal* base parameters, as research/DISCREPANCY.md section 4 defines it. Discovery, though, sees only
+what is left after the base model (tensile + bending stiffness, free) is refitted: the part of the effect's signal
+the base cannot mimic. This script measures that part. For each hideable effect at the strength the final benchmark
+used for SNR 2 (``experiments/discrepancy-5000/strengths.json``), it simulates the harness's rig data with the
+load-cell noise shrunk ``--shrink`` times (so the fit sees the same relative weights of force and strain tests but
+noise does not blur the misfit), fits the base model from four starts and the base plus the hidden effect from the
+truth, and reports per test the RMS of the binned misfit on the fitted and held-out runs, in units of the rig's
+per-sample noise at 0.2 N (the SNR's sigma):
 
 - ``snr_nominal``: the benchmark's SNR of that test (signal at equal base parameters);
 - ``snr_left_base``: what the refitted base leaves (the signal discovery can see);
@@ -43,7 +43,9 @@ from peano_bayes import enable_compilation_cache
 from peano_bayes.atomic import write_text
 from peano_bayes.discovery import discovery_data
 from peano_bayes.discovery.fitting import evaluate, fit_models
-from peano_bayes.discovery.harness import (
+from peano_bayes.discovery.model import DEFAULT_BASE, NAMES, ModelSpec
+from peano_bayes.discovery.workflow import fit_base
+from peano_bayes.validation.discovery_benchmark import (
     HIDEABLE,
     REFERENCE_FORCE_SD_N,
     Case,
@@ -53,8 +55,6 @@ from peano_bayes.discovery.harness import (
     strength_for_snr,
     true_model,
 )
-from peano_bayes.discovery.model import DEFAULT_BASE, NAMES, ModelSpec
-from peano_bayes.discovery.workflow import fit_base
 
 HERE = Path(__file__).resolve().parent
 TENSILE = ("tensile_ka_n_per_m", "tensile_kb_n_per_m2")

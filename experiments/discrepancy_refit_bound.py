@@ -1,7 +1,7 @@
 """The held-out gap ratio a perfect workflow would reach at the benchmark's SNR, with the base *refitted*.
 
 The benchmark scores a correct detection by ``RMSE after / before`` on the held-out runs of the test with the
-largest gap before (``peano_bayes.discovery.harness.score``); issue 6's target is <= 0.5.
+largest gap before (``peano_bayes.validation.discovery_benchmark.score``); issue 6's target is <= 0.5.
 ``discrepancy_gap_bound.py`` bounds that ratio with the base at the *true* parameters, which overstates the gap a
 real "before" leaves: the benchmark's base is refitted and absorbs part of the effect. This script measures the
 ratio with the same refits the workflow makes, on data whose load-cell and strain noise are shrunk ``--shrink``
@@ -45,7 +45,9 @@ from peano_bayes import enable_compilation_cache
 from peano_bayes.atomic import write_text
 from peano_bayes.discovery import discovery_data
 from peano_bayes.discovery.fitting import evaluate, fit_models
-from peano_bayes.discovery.harness import (
+from peano_bayes.discovery.model import DEFAULT_BASE
+from peano_bayes.discovery.workflow import fit_base
+from peano_bayes.validation.discovery_benchmark import (
     HIDEABLE,
     REFERENCE_FORCE_SD_N,
     Case,
@@ -54,8 +56,6 @@ from peano_bayes.discovery.harness import (
     strength_for_snr,
     true_model,
 )
-from peano_bayes.discovery.model import DEFAULT_BASE
-from peano_bayes.discovery.workflow import fit_base
 
 HERE = Path(__file__).resolve().parent
 

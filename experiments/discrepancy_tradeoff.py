@@ -34,7 +34,7 @@ import pandas as pd
 
 from peano_bayes.atomic import write_text
 from peano_bayes.discovery.effects import PHYSICS_EFFECTS
-from peano_bayes.inference.calibration import wilson_interval
+from peano_bayes.validation.sbc import wilson_interval
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from discrepancy_benchmark import markdown  # noqa: E402

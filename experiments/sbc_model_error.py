@@ -32,9 +32,9 @@ import pandas as pd
 from scipy.stats import norm
 
 from peano_bayes.atomic import write_text
-from peano_bayes.inference.calibration import NOISE_NAME, SBC_FREE, base_posterior, simulate
 from peano_bayes.inference.likelihood import bin_noise_sd, predict, prepare
 from peano_bayes.rig import RigSimulationError
+from peano_bayes.validation.sbc import NOISE_NAME, SBC_FREE, base_posterior, simulate
 
 HERE = Path(__file__).resolve().parent
 LEVELS = (0.5, 0.9)

@@ -3,7 +3,8 @@ the gap shrink (research/DISCREPANCY.md; effect names of DESIGN.md section 5).
 
 Data flow: a rig :class:`~peano_bayes.data.Dataset` -> :func:`discovery_data` (one specimen, binned, whole
 runs split into fit and held-out, covariates) -> :func:`discover` (base fit, diagnosis, screening of the
-:data:`LIBRARY`, gates) -> :func:`write_report`. :mod:`.harness` validates it on data with hidden effects.
+:data:`LIBRARY`, gates) -> :func:`write_report`. :mod:`peano_bayes.validation.discovery_benchmark` validates it
+on data with hidden effects.
 """
 
 from .data import SplitData, discovery_data
