@@ -8,8 +8,8 @@ rig's own protocol; metrics from ``peano_bayes.metrics``) match
 30 % ambiguous); orderings (bundled ``published_orderings.csv``) are soft hinge residuals on log-ratios with a
 5 % margin, active once the other material of a pair has been fitted (materials are fitted in ``FIT_ORDER``);
 a weak prior term keeps each freed parameter near its nominal value. The step response is not required to
-overshoot (a hinge on it cost the 30 kPa fits too much); ``peano_bayes.metrics.step_window`` times a response without
-overshoot to 99 % of its rise.
+overshoot (a hinge on it cost the 30 kPa fits too much); ``peano_bayes.metrics.smoothed_step_metrics`` times a
+response without overshoot to 99 % of its rise.
 
 Stiffness at -1.5 % (0 kPa) is fitted on a dedicated noise-free 0 kPa stretch from 0 to -3 % strain, because the
 rig's 0 kPa cycle starts at the Table 4 start tension, which stretches soft muscles past -1.5 %.

@@ -18,10 +18,10 @@ import sys
 from pathlib import Path
 
 from peano_bayes import bundled, enable_compilation_cache
+from peano_bayes.atomic import write_text
 from peano_bayes.data import load
 from peano_bayes.discovery import Gates, discover, discovery_data, write_report
 from peano_bayes.discovery.effects import PHYSICS_EFFECTS
-from peano_bayes.inference.results import write_atomic_text
 from peano_bayes.pipeline import BUNDLED_MATERIALS
 
 HERE = Path(__file__).resolve().parent
@@ -107,7 +107,7 @@ def main(argv=None) -> int:
             f"{', '.join(r['missed']) or '-'} | {', '.join(r['extra']) or '-'} | {r['seconds']:.0f} | "
             f"{', '.join(r['generated_step_only']) or '-'} |"
         )
-    write_atomic_text(out / "SUMMARY.md", "\n".join(lines) + "\n")
+    write_text(out / "SUMMARY.md", "\n".join(lines) + "\n")
     print("\n".join(lines))
     print(json.dumps({"materials": rows}))
     return 0

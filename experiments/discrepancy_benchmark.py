@@ -1,6 +1,6 @@
 """Validation of `peano-bayes discover` on virtual-rig data with a hidden effect.
 
-Cases (peano_bayes.discovery.harness): each hideable library effect at several signal-to-noise ratios; no
+Cases (peano_bayes.validation.discovery_benchmark): each hideable library effect at several signal-to-noise ratios; no
 effect at several noise levels (false positives); slow load-cell drift (outside the library); two effects at
 once. ``--seeds`` seeds per case, starting at ``--first-seed`` (default 10000). The label never reaches
 ``discover``.
@@ -26,7 +26,6 @@ import argparse
 import gzip
 import hashlib
 import json
-import os
 import shutil
 import subprocess
 import sys
@@ -37,8 +36,9 @@ import numpy as np
 import pandas as pd
 
 from peano_bayes import enable_compilation_cache
-from peano_bayes.discovery.harness import HIDEABLE, NOT_HIDEABLE, Case, strength_for_snr
-from peano_bayes.inference.calibration import wilson_interval
+from peano_bayes.atomic import write_text
+from peano_bayes.validation.discovery_benchmark import HIDEABLE, NOT_HIDEABLE, Case, strength_for_snr
+from peano_bayes.validation.sbc import wilson_interval
 
 HERE = Path(__file__).resolve().parent
 TWO_EFFECTS = ("hysteresis", "flow_restriction")
@@ -62,7 +62,7 @@ def key(case: Case, seed: int) -> str:
 def _one(case: Case, seed: int, strengths: dict) -> dict:
     enable_compilation_cache()
     from peano_bayes.discovery import discover, discovery_data
-    from peano_bayes.discovery.harness import hidden_dataset, score
+    from peano_bayes.validation.discovery_benchmark import hidden_dataset, score
 
     start = time.perf_counter()
     dataset = hidden_dataset(case, seed, {e: strengths[e] for e in case.effects})
@@ -94,9 +94,7 @@ def _calibrate(out: Path, all_cases) -> dict:
             if name not in strengths:
                 strengths[name] = strength_for_snr(e, case.snr)
                 print(f"calibrated {name}: strength factor {strengths[name]:.4g}", flush=True)
-                tmp = path.with_suffix(".tmp")
-                tmp.write_text(json.dumps(strengths, indent=1))
-                os.replace(tmp, path)
+                write_text(path, json.dumps(strengths, indent=1))
     return strengths
 
 

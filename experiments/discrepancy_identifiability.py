@@ -1,7 +1,7 @@
 """How much of each hidden effect the base model can absorb (why some effects are missed at SNR 2).
 
-The benchmark's SNR (peano_bayes.discovery.harness) is ``max over tests of RMS(y_with - y_without) / sigma``
-at *equal* base parameters. Discovery, though, sees only what is left after the base model (tensile + bending
+The benchmark's SNR (peano_bayes.validation.discovery_benchmark) is
+``max over tests of RMS(y_with - y_without) / sigma`` at *equal* base parameters. Discovery, though, sees only what is left after the base model (tensile + bending
 stiffness, free) is refitted: the part of the effect's signal the base cannot mimic. This script measures that
 part. For each hideable effect at the strength the final benchmark used for SNR 2 (``--strengths``, default the
 current final run's ``experiments/discrepancy-10000/strengths.json``), it simulates the harness's rig data with
@@ -42,9 +42,12 @@ import numpy as np
 import pandas as pd
 
 from peano_bayes import enable_compilation_cache
+from peano_bayes.atomic import write_text
 from peano_bayes.discovery import discovery_data
 from peano_bayes.discovery.fitting import evaluate, fit_models
-from peano_bayes.discovery.harness import (
+from peano_bayes.discovery.model import DEFAULT_BASE, NAMES, ModelSpec
+from peano_bayes.discovery.workflow import fit_base
+from peano_bayes.validation.discovery_benchmark import (
     HIDEABLE,
     REFERENCE_FORCE_SD_N,
     Case,
@@ -54,9 +57,6 @@ from peano_bayes.discovery.harness import (
     strength_for_snr,
     true_model,
 )
-from peano_bayes.discovery.model import DEFAULT_BASE, NAMES, ModelSpec
-from peano_bayes.discovery.workflow import fit_base
-from peano_bayes.inference.results import write_atomic_text
 
 HERE = Path(__file__).resolve().parent
 TENSILE = ("tensile_ka_n_per_m", "tensile_kb_n_per_m2")
@@ -146,7 +146,7 @@ def main(argv=None) -> int:
     suffix += "-coupon" if args.coupon else ""
     columns = ["snr_nominal", "snr_left_base", "snr_left_effect", "snr_visible"]
     columns += [c for c in table.columns if c.startswith("snr_left_coupon_")]
-    write_atomic_text(out / f"identifiability{suffix}.csv", table.to_csv(index=False, float_format="%.4g"))
+    write_text(out / f"identifiability{suffix}.csv", table.to_csv(index=False, float_format="%.4g"))
     summary = table.groupby("effect")[columns].max()
     source = Path(args.strengths).resolve().relative_to(HERE.parent)
     lines = [
@@ -172,7 +172,7 @@ def main(argv=None) -> int:
     ]
     for effect, r in summary.iterrows():
         lines.append(f"| {effect} | " + " | ".join(f"{r[c]:.2f}" for c in columns) + " |")
-    write_atomic_text(out / f"IDENTIFIABILITY{suffix}.md", "\n".join(lines) + "\n")
+    write_text(out / f"IDENTIFIABILITY{suffix}.md", "\n".join(lines) + "\n")
     print(json.dumps({e: round(float(v), 4) for e, v in summary["snr_visible"].items()}))
     return 0
 

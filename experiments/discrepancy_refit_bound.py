@@ -1,8 +1,8 @@
 """The held-out gap ratio a perfect workflow would reach at the benchmark's SNR, with the base *refitted*.
 
 The benchmark scores a correct detection by ``RMSE after / before`` on the held-out runs of the test with the
-largest gap before (``peano_bayes.discovery.harness.score``); the target is <= 0.5. A bound with the base at the
-*true* parameters would overstate the gap a real "before" leaves: the benchmark's base is refitted and absorbs
+largest gap before (``peano_bayes.validation.discovery_benchmark.score``); the target is <= 0.5. A bound with the
+base at the *true* parameters would overstate the gap a real "before" leaves: the benchmark's base is refitted and absorbs
 part of the effect. This script measures the
 ratio with the same refits the workflow makes, on data whose load-cell and strain noise are shrunk ``--shrink``
 times (the pressure sensors keep the rig's noise, so input denoising leaves its real floor), per test, on the
@@ -43,9 +43,12 @@ import numpy as np
 import pandas as pd
 
 from peano_bayes import enable_compilation_cache
+from peano_bayes.atomic import write_text
 from peano_bayes.discovery import discovery_data
 from peano_bayes.discovery.fitting import evaluate, fit_models
-from peano_bayes.discovery.harness import (
+from peano_bayes.discovery.model import DEFAULT_BASE
+from peano_bayes.discovery.workflow import fit_base
+from peano_bayes.validation.discovery_benchmark import (
     HIDEABLE,
     REFERENCE_FORCE_SD_N,
     Case,
@@ -54,9 +57,6 @@ from peano_bayes.discovery.harness import (
     strength_for_snr,
     true_model,
 )
-from peano_bayes.discovery.model import DEFAULT_BASE
-from peano_bayes.discovery.workflow import fit_base
-from peano_bayes.inference.results import write_atomic_text
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from discrepancy_benchmark import log_rows, run_logs  # noqa: E402
@@ -140,7 +140,7 @@ def main(argv=None) -> int:
     table = pd.DataFrame(rows)
     out = run / "checks" / ("refit_bound" if args.snr == 2.0 else f"refit_bound_snr{args.snr:g}")
     out.mkdir(parents=True, exist_ok=True)
-    write_atomic_text(out / "refit_bound.csv", table.to_csv(index=False, float_format="%.4g"))
+    write_text(out / "refit_bound.csv", table.to_csv(index=False, float_format="%.4g"))
     smallest = table.loc[table.groupby(["effect", "seed"])["expected_ratio"].idxmin()]
     per_effect = smallest.groupby("effect")["expected_ratio"].agg(["median", "min", "max"])
     observed = observed_ratios(run, args.snr).groupby("effect")["ratio"]
@@ -164,7 +164,7 @@ def main(argv=None) -> int:
         met = f"{int(s.met)}/{int(s.n)}" if s is not None else "-"
         med = f"{s['median']:.2f}" if s is not None else "-"
         lines.append(f"| {effect} | {r['median']:.2f} | {r['min']:.2f}-{r['max']:.2f} | {met} | {med} |")
-    write_atomic_text(out / "REFIT_BOUND.md", "\n".join(lines) + "\n")
+    write_text(out / "REFIT_BOUND.md", "\n".join(lines) + "\n")
     print("\n".join(lines))
     summary = {
         e: {

@@ -4,7 +4,7 @@
                               [--exact-inputs]
 
 Each replicate draws parameters from the prior, runs the virtual rig with them and infers them with the same
-posterior-mode start and emcee sampler as ``peano-bayes fit`` (see ``peano_bayes.inference.calibration`` for the
+posterior-mode start and emcee sampler as ``peano-bayes fit`` (see ``peano_bayes.validation.sbc`` for the
 reduced problem). Replicates are appended to ``OUT/replicates.jsonl`` as they finish, so an interrupted study
 continues where it stopped; the summary (``OUT/coverage.csv``, ``OUT/SBC.md``, ``OUT/ranks.png``) is
 rewritten atomically at the end. ``--exact-inputs`` runs the same study with noiseless strain and pressure
@@ -26,14 +26,14 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
-from peano_bayes.inference.calibration import (
+from peano_bayes.atomic import write_text
+from peano_bayes.validation.sbc import (
     LEVELS,
     RANK_DRAWS,
     base_posterior,
     coverage_table,
     run_replicate,
 )
-from peano_bayes.inference.results import write_atomic_text
 
 TARGET = (0.85, 0.95)
 
@@ -64,7 +64,7 @@ def markdown(rows: list[dict], replicates: list[dict], seed: int, seconds: float
         "# Simulation-based calibration",
         "",
         f"{n} replicates (root seed {seed}), TP load cycles, three free physics parameters and the load cell's "
-        f"noise scale (`peano_bayes.inference.calibration`). Each replicate: truth from the prior, data from the "
+        f"noise scale (`peano_bayes.validation.sbc`). Each replicate: truth from the prior, data from the "
         f"virtual rig{' with noiseless strain and pressure sensors (exact inputs)' if exact_inputs else ''}, "
         f"posterior-mode start from the prior median, emcee to the convergence gates "
         f"({converged} of {n} converged; the rest stopped at the step limit and are counted as they are). "
@@ -137,8 +137,8 @@ def main(argv=None) -> int:
     rows = coverage_table(replicates, names)
     seconds = time.perf_counter() - t0 + sum(r["seconds"] for r in replicates if r["index"] not in todo)
     flat = [{k: (json.dumps(v) if isinstance(v, list) else v) for k, v in row.items()} for row in rows]
-    write_atomic_text(args.out / "coverage.csv", pd.DataFrame(flat).to_csv(index=False))
-    write_atomic_text(args.out / "SBC.md", markdown(rows, replicates, args.seed, seconds, args.exact_inputs))
+    write_text(args.out / "coverage.csv", pd.DataFrame(flat).to_csv(index=False))
+    write_text(args.out / "SBC.md", markdown(rows, replicates, args.seed, seconds, args.exact_inputs))
     rank_figure(replicates, names, args.out / "ranks")
     print((args.out / "SBC.md").read_text())
     summary = {

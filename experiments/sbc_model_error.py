@@ -31,10 +31,10 @@ import numpy as np
 import pandas as pd
 from scipy.stats import norm
 
-from peano_bayes.inference.calibration import NOISE_NAME, SBC_FREE, base_posterior, simulate
+from peano_bayes.atomic import write_text
 from peano_bayes.inference.likelihood import bin_noise_sd, predict, prepare
-from peano_bayes.inference.results import write_atomic_text
 from peano_bayes.rig import RigSimulationError
+from peano_bayes.validation.sbc import NOISE_NAME, SBC_FREE, base_posterior, simulate
 
 HERE = Path(__file__).resolve().parent
 LEVELS = (0.5, 0.9)
@@ -117,7 +117,7 @@ def main(argv=None) -> int:
         }
         table.append({"index": row["index"], **figures, **covered})
     frame = pd.DataFrame(table)
-    write_atomic_text(args.study / "model_error.csv", frame.to_csv(index=False))
+    write_text(args.study / "model_error.csv", frame.to_csv(index=False))
 
     quartile = pd.qcut(frame["noise_sd_n"], 4, labels=False)
     lines = [
@@ -159,7 +159,7 @@ def main(argv=None) -> int:
         f"of these, {int((big & miss).sum())} have a truth outside a 90 % interval, against "
         f"{int((~big & miss).sum())} of the other {int((~big).sum())}.",
     ]
-    write_atomic_text(args.study / "MODEL_ERROR.md", "\n".join(lines) + "\n")
+    write_text(args.study / "MODEL_ERROR.md", "\n".join(lines) + "\n")
     print("\n".join(lines))
     summary["shifted_gt_1sd"] = {"replicates": int(big.sum()), "missed_90": int((big & miss).sum())}
     summary["others"] = {"replicates": int((~big).sum()), "missed_90": int((~big & miss).sum())}

@@ -360,8 +360,8 @@ run.arguments = _run_arguments
 
 @command("prior", "priors: 'prior new --like CODE --out FILE.toml' writes a starting prior to edit")
 def prior_command(args):
+    from .atomic import write_text
     from .inference.priors import load_prior, starting_prior
-    from .inference.results import write_atomic_text
 
     out = Path(args.out)
     if out.suffix != ".toml":
@@ -372,7 +372,7 @@ def prior_command(args):
         raise PeanoBayesInputError(f"--out {out}: the folder {out.parent} does not exist")
     material = args.material or out.stem
     text = starting_prior(args.like, material=material)
-    write_atomic_text(out, text)
+    write_text(out, text)
     prior = load_prior(out)  # the written file loads as it will in a fit
     print(f"wrote {out}: the prior of {args.like} ({len(prior.names)} parameters) for material {material}; edit it, "
           f"then: peano-bayes fit DATA.csv --prior {out}")
@@ -418,7 +418,7 @@ metrics_command.arguments = _metrics_arguments
 def rank_command(args):
     from pathlib import Path
 
-    from .inference.results import write_atomic_text
+    from .atomic import write_text
     from .metrics import read_metrics
     from .ranking import rank_materials, ranking_markdown
 
@@ -432,8 +432,8 @@ def rank_command(args):
     out = Path(args.out) if args.out else Path(args.results[0]).resolve().parent
     out.mkdir(parents=True, exist_ok=True)
     text = ranking_markdown(report)
-    write_atomic_text(out / "ranking.json", json.dumps(report, indent=1))
-    write_atomic_text(out / "ranking.md", "# Ranking\n\n" + text + "\n")
+    write_text(out / "ranking.json", json.dumps(report, indent=1))
+    write_text(out / "ranking.md", "# Ranking\n\n" + text + "\n")
     print(text)
     print(f"wrote {out / 'ranking.json'} and {out / 'ranking.md'}")
     return report
@@ -453,8 +453,8 @@ rank_command.arguments = _rank_arguments
 def recommend_command(args):
     from pathlib import Path
 
+    from .atomic import write_text
     from .figures import recommendation_figure
-    from .inference.results import write_atomic_text
     from .recommend import recommend, recommendation_markdown
 
     report = recommend(args.spec, args.results)  # validates the spec and every result before writing
@@ -463,8 +463,8 @@ def recommend_command(args):
     out.mkdir(parents=True, exist_ok=True)
     stem = out / f"{spec.stem}_recommendation"
     text = recommendation_markdown(report)
-    write_atomic_text(stem.with_suffix(".json"), json.dumps(report, indent=1))
-    write_atomic_text(stem.with_suffix(".md"), f"# Recommendation for {spec.name}\n\n{text}\n")
+    write_text(stem.with_suffix(".json"), json.dumps(report, indent=1))
+    write_text(stem.with_suffix(".md"), f"# Recommendation for {spec.name}\n\n{text}\n")
     recommendation_figure(report, stem)
     print(text)
     print(f"wrote {stem}.json, .md, .png and .pdf")

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
 from pathlib import Path
 
 import arviz as az
@@ -23,6 +22,7 @@ import matplotlib.ticker
 import numpy as np
 
 from . import plots
+from .atomic import replacing
 from .inference.likelihood import NOISE_PARAMETERS, predict, prepare
 from .metrics import METRIC_UNITS
 
@@ -37,9 +37,8 @@ def save(fig, path_stem: Path) -> list[Path]:
     written = []
     for ext in ("png", "pdf"):
         final = path_stem.with_suffix(f".{ext}")
-        tmp = final.with_name(f".{final.name}.tmp")
-        fig.savefig(tmp, format=ext, bbox_inches="tight")
-        os.replace(tmp, final)
+        with replacing(final) as tmp:
+            fig.savefig(tmp, format=ext, bbox_inches="tight")
         written.append(final)
     plt.close(fig)
     return written
@@ -92,7 +91,7 @@ def step_band(idata, dataset, n_draws: int = 40) -> dict | None:
     over ``n_draws`` posterior draws: ``time_s``, ``observed``, ``low``, ``median``, ``high`` (94 % of the
     draws, noise-free), ``title`` and ``prior_only`` (parameters drawn from the prior because the fit had no
     step test). ``None`` when the dataset has no step run."""
-    from .metrics import parameter_draws, result_config
+    from .inference.results import parameter_draws, result_config
 
     runs = [r for r in dataset.runs if r.test == "step"]
     if not runs:
@@ -120,7 +119,7 @@ def step_band(idata, dataset, n_draws: int = 40) -> dict | None:
 def material_figures(result_dir: str | Path, dataset=None) -> list[Path]:
     """``predictive`` and ``corner`` figures of one result directory into its ``figures/``; given its
     ``dataset`` with a step run, also ``step`` (:func:`step_band`)."""
-    from .metrics import load_result
+    from .inference.results import load_result
 
     result_dir = Path(result_dir)
     idata = load_result(result_dir)

@@ -9,13 +9,14 @@ and repeats. Interpretation choices, stated once:
   NaN when the cycle does not cover -1.5 % (the start tension already stretches the muscle past it);
 - hysteresis loss, free strain and energy: the load cycles at the test pressure (Figure 9 uses the
   pressurized cycles of Figure 8(b)(d));
-- step metrics: the formulas of :func:`peano_bayes.physics.metrics.step_metrics` (rms speed, rms power
-  ``m (g + a) v``, rms mechanical over rms fluid power) on strain and flow smoothed with a zero-phase
+- step metrics (:func:`smoothed_step_metrics`): :func:`peano_bayes.physics.metrics.step_metrics` (rms speed,
+  rms power ``m (g + a) v``, rms mechanical over rms fluid power) on strain and flow smoothed with a zero-phase
   Savitzky-Golay filter (``STEP_SMOOTHING_S``, as any rig must before taking a speed and an acceleration from
   a 1 kHz position signal), over a window from the supply edge to the first maximum of the smoothed strain
   after it has risen halfway to its final value (the first overshoot peak; sensor noise makes earlier local
-  maxima), or, for a response without overshoot (over 1 % of the rise), to 99 % of the rise. For an
-  overshooting response on noise-free signals this equals ``step_metrics`` to within a percent.
+  maxima), or, for a response without overshoot (over 1 % of the rise), to 99 % of the rise (its
+  ``overshoot_fraction`` rule). For an overshooting response on noise-free signals this equals the rule
+  without ``overshoot_fraction`` to within a percent.
 
 **Predicted** (:func:`model_metrics`, :func:`posterior_metrics`): the same definitions on noise-free virtual-rig
 signals of one specimen (:func:`peano_bayes.rig.simulate_dataset`, the paper's protocol for the material), one
@@ -42,11 +43,11 @@ from scipy.signal import savgol_filter
 
 from . import bundled
 from .errors import PeanoBayesInputError
+from .formatting import format_number
 from .inference.posterior import STEP_ONLY_PARAMETERS
-from .inference.priors import prior_for
+from .inference.results import load_result, parameter_draws, result_config
 from .physics import DEFAULT_CONFIG, PAPER_GEOMETRY, Geometry, LoadCycle, ModelConfig, simulate_load_cycle
 from .physics import metrics as m
-from .physics.model import GRAVITY_M_PER_S2
 from .rig import RigNoise, RigSimulationError, apply_quirks, simulate_dataset
 
 #: Savitzky-Golay window of the step-response smoothing [s] (order 3); 15 ms at 1 kHz is 15 samples.
@@ -95,53 +96,21 @@ def stiffness(strain, force_n, flat_length_m, at_strain: float = STIFFNESS_STRAI
     return float(-coef[1] / flat_length_m)
 
 
-#: A step response overshoots if its peak exceeds its final value by this fraction of the rise; without
-#: overshoot the window ends where the strain first reaches ``1 - OVERSHOOT_FRACTION`` of the rise.
-OVERSHOOT_FRACTION = 0.01
-
-
-def step_window(strain) -> tuple[int, int]:
-    """``(half, stop)`` sample indices of a (smoothed) step response: ``half`` where the strain first reaches
-    half its rise; ``stop`` the first maximum after it (the first overshoot peak, Table 3), or, for a response
-    that does not overshoot, the first sample at 99 % of the rise (the peak is then undefined: the slow tail
-    would otherwise set the rms speed, and noise would decide where it ends)."""
-    strain = np.asarray(strain, float)
-    n = max(len(strain) // 20, 3)
-    initial, final = np.median(strain[:n]), np.median(strain[-n:])
-    rise = final - initial
-    half = int(np.argmax(strain - initial >= 0.5 * rise))
-    if strain.max() - final < OVERSHOOT_FRACTION * rise:
-        return half, int(np.argmax(strain - initial >= (1 - OVERSHOOT_FRACTION) * rise))
-    step = np.diff(strain[half:])
-    turns = np.nonzero((step[:-1] > 0) & (step[1:] <= 0))[0]
-    stop = half + 1 + int(turns[0]) if len(turns) else len(strain) - 1
-    return half, stop
-
-
-def step_metrics(time_s, strain, supply_pa, flow_m3_per_s, load_n, flat_length_m, test_pressure_pa) -> dict:
-    """Speed [m/s], power per pressure [W/MPa], efficiency [-] and overshoot (peak over final strain, as a
-    fraction of the rise) of a step response, Table 3 definitions
-    (the formulas of ``peano_bayes.physics.metrics.step_metrics``) on smoothed signals over the window from the
-    supply edge (``metrics.step_window``) to the first overshoot peak (:func:`step_window`)."""
-    time_s = np.asarray(time_s, float)
-    strain = _smooth(strain, time_s)
-    flow = _smooth(flow_m3_per_s, time_s)
-    start, _ = m.step_window(time_s, strain, supply_pa)
-    _, stop = step_window(strain)
-    window = slice(start, max(stop, start + 2) + 1)
-    v = np.gradient(strain * flat_length_m, time_s)
-    a = np.gradient(v, time_s)
-    power = load_n * (1.0 + a / GRAVITY_M_PER_S2) * v
-    rms_power = float(np.sqrt(np.mean(power[window] ** 2)))
-    fluid = np.asarray(supply_pa, float) * flow
-    n = max(len(strain) // 20, 3)
-    initial, final = np.median(strain[:n]), np.median(strain[-n:])
-    return {
-        "overshoot": float((strain.max() - final) / (final - initial)),
-        "speed": float(np.sqrt(np.mean(v[window] ** 2))),
-        "power_per_pressure": rms_power / (test_pressure_pa / m.PA_PER_MPA),
-        "efficiency": rms_power / float(np.sqrt(np.mean(fluid[window] ** 2))),
-    }
+def smoothed_step_metrics(time_s, strain, supply_pa, flow_m3_per_s, load_n, flat_length_m, test_pressure_pa):
+    """Table 3 step metrics of a measured step response: :func:`peano_bayes.physics.metrics.step_metrics` with
+    ``overshoot_fraction`` :data:`~peano_bayes.physics.metrics.OVERSHOOT_FRACTION` on strain and flow smoothed
+    over ``STEP_SMOOTHING_S``."""
+    flow = None if flow_m3_per_s is None else _smooth(flow_m3_per_s, time_s)
+    return m.step_metrics(
+        time_s,
+        _smooth(strain, time_s),
+        supply_pa,
+        flow,
+        load_n,
+        flat_length_m,
+        test_pressure_pa,
+        overshoot_fraction=m.OVERSHOOT_FRACTION,
+    )
 
 
 def run_metrics(dataset) -> dict[str, list[float]]:
@@ -163,7 +132,7 @@ def run_metrics(dataset) -> dict[str, list[float]]:
             out["stroke"].append(m.stroke(run.strain))
         elif run.test == "step":
             load = float(np.nanmedian(run.load_n))
-            for name, value in step_metrics(
+            for name, value in smoothed_step_metrics(
                 run.time_s, run.strain, run.supply_pa, run.flow_m3_per_s, load, l0, p_test
             ).items():
                 out[name].append(value)
@@ -251,53 +220,12 @@ class PosteriorMetrics:
         return out
 
 
-def result_config(idata) -> ModelConfig:
-    """The model configuration a result was sampled with (its ``model_config`` attribute)."""
-    return ModelConfig(**json.loads(idata.posterior.attrs["model_config"]))
-
-
-def parameter_draws(idata, n_draws: int, seed: int = 0) -> tuple[list[dict], tuple[str, ...]]:
-    """``n_draws`` parameter sets [SI] of the typical specimen (specimen offset 0) from a result, evenly spaced
-    over the stored posterior, and the names drawn from the prior instead (see :class:`PosteriorMetrics`).
-
-    Every name the result's configuration reads: posterior draw if sampled; else the ``fixed_parameters``
-    attribute or the nominal value (shape constants held in the fit); except step-only parameters
-    (:data:`~peano_bayes.inference.posterior.STEP_ONLY_PARAMETERS`) of a fit without the step test, which are
-    drawn from the material's prior file so the step metrics carry honest (prior) uncertainty."""
-    attrs = idata.posterior.attrs
-    config = result_config(idata)
-    material = attrs["material"]
-    post = idata.posterior.stack(sample=("chain", "draw"))
-    total = post.sizes["sample"]
-    if not 1 <= n_draws <= total:
-        raise PeanoBayesInputError(f"n_draws must be in [1, {total}] (the stored draws), got {n_draws}")
-    pick = np.linspace(0, total - 1, n_draws).round().astype(int)
-    fixed = {**config.nominal_parameters(), **json.loads(attrs.get("fixed_parameters", "{}"))}
-    names = config.parameter_names()
-    prior_only = tuple(n for n in names if n not in post and n in STEP_ONLY_PARAMETERS)
-    prior_values = {}
-    if prior_only:
-        prior = prior_for(material, config=config).select(prior_only)
-        prior_values = prior.sample_params(np.random.default_rng([seed, 7]), n_draws)
-    sets = []
-    for i, j in enumerate(pick):
-        params = {}
-        for n in names:
-            if n in post:
-                params[n] = float(post[n].values[j])
-            elif n in prior_values:
-                params[n] = float(np.asarray(prior_values[n])[i])
-            else:
-                params[n] = float(fixed[n])
-        sets.append(params)
-    return sets, prior_only
-
-
 def posterior_metrics(
     idata, *, n_draws: int = 100, seed: int = 0, progress: Callable | None = None
 ) -> PosteriorMetrics:
     """Posterior predictive Table 3 metrics of a result (``posterior.nc`` as arviz InferenceData): the paper's
-    protocol simulated noise-free for ``n_draws`` posterior draws (:func:`parameter_draws`), each measured as
+    protocol simulated noise-free for ``n_draws`` posterior draws
+    (:func:`~peano_bayes.inference.results.parameter_draws`), each measured as
     the rig would be (:func:`model_metrics`). ``progress`` wraps the draw iterator (e.g. ``tqdm``)."""
     material = idata.posterior.attrs["material"]
     config = result_config(idata)
@@ -343,34 +271,6 @@ def compare_published(material: str, summary: dict, path: str | Path | None = No
     return rows
 
 
-def load_result(path: str | Path):
-    """The arviz InferenceData of a result: ``path`` is a ``posterior.nc`` file or a directory holding one.
-    Raises :class:`~peano_bayes.errors.PeanoBayesInputError` naming the file and what is wrong."""
-    path = Path(path)
-    nc = path / "posterior.nc" if path.is_dir() else path
-    if not nc.is_file():
-        raise PeanoBayesInputError(
-            f"{nc}: no such file; expected a result directory of 'peano-bayes fit' or its posterior.nc"
-        )
-    try:
-        idata = az.from_netcdf(str(nc))
-    except (OSError, ValueError) as err:
-        raise PeanoBayesInputError(f"{nc}: not a readable NetCDF result ({err})") from None
-    if "posterior" not in idata.groups():
-        raise PeanoBayesInputError(f"{nc}: has no posterior group; expected the posterior.nc of 'peano-bayes fit'")
-    missing = [k for k in ("material", "model_config") if k not in idata.posterior.attrs]
-    if missing:
-        raise PeanoBayesInputError(
-            f"{nc}: the posterior group lacks the attribute(s) {', '.join(missing)}; it was written by an older "
-            "peano_bayes or another tool; rerun 'peano-bayes fit'"
-        )
-    return idata
-
-
-def _fmt(x: float) -> str:
-    return f"{x:.3g}" if math.isfinite(x) else "n/a"
-
-
 def metrics_markdown(material: str, summary: dict, comparison: list[dict]) -> str:
     """A markdown table of a material's posterior metrics with the published values beside them."""
     published = {row["metric"]: row for row in comparison}
@@ -384,8 +284,8 @@ def metrics_markdown(material: str, summary: dict, comparison: list[dict]) -> st
         inside = "-" if not row or row["inside"] is None else ("yes" if row["inside"] else "**no**")
         flag = " (prior: step not fitted)" if s["from_prior"] else ""
         lines.append(
-            f"| {name}{flag} | {s['unit']} | {_fmt(s['median'])} | {_fmt(s['hdi_low'])} to {_fmt(s['hdi_high'])} "
-            f"| {pub} | {inside} |"
+            f"| {name}{flag} | {s['unit']} | {format_number(s['median'])} | "
+            f"{format_number(s['hdi_low'])} to {format_number(s['hdi_high'])} | {pub} | {inside} |"
         )
     return "\n".join(lines)
 
@@ -399,7 +299,7 @@ def evaluate_result(
     (:func:`compare_published`) and ``draws`` (metric -> list of values, for :mod:`peano_bayes.ranking`)."""
     from tqdm.auto import tqdm
 
-    from .inference.results import write_atomic_text
+    from .atomic import write_text
 
     idata = load_result(path)
     total = idata.posterior.sizes["chain"] * idata.posterior.sizes["draw"]
@@ -419,7 +319,7 @@ def evaluate_result(
         "draws": {name: [float(x) for x in values] for name, values in result.draws.items()},
     }
     directory = Path(path) if Path(path).is_dir() else Path(path).parent
-    write_atomic_text(directory / "metrics.json", json.dumps(out, indent=1, default=float))
+    write_text(directory / "metrics.json", json.dumps(out, indent=1, default=float))
     return out
 
 

@@ -11,13 +11,13 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 import time
 from pathlib import Path
 
 import numpy as np
 
 from . import bundled
+from .atomic import write_text
 from .data import Dataset, load
 from .defaults import (
     ALL_TESTS,
@@ -29,6 +29,7 @@ from .defaults import (
     HDI_PROB,
 )
 from .errors import PeanoBayesInputError
+from .formatting import format_number
 from .inference.fit import fit, fit_quality
 from .inference.laplace import posterior_mode
 from .inference.likelihood import prepare
@@ -37,7 +38,6 @@ from .inference.priors import load_prior, prior_for
 from .inference.results import (
     parameter_table,
     to_inference_data,
-    write_atomic_text,
     write_netcdf,
 )
 from .inference.sample import sample, walker_count
@@ -197,7 +197,7 @@ def infer(
             stale.unlink(missing_ok=True)
         log(f"{code}: least squares from {n_starts} starts ...")
         fitted = least_squares(posterior, prior, n_starts=n_starts, seed=seed)
-        write_atomic_text(fit_path, json.dumps(fitted, indent=1))
+        write_text(fit_path, json.dumps(fitted, indent=1))
         timings["least_squares_s"] = fitted["seconds"]
         log(
             f"{code}: least squares done in {fitted['seconds']:.1f} s "
@@ -274,7 +274,7 @@ def infer(
         "timings_s": timings,
     }
     write_netcdf(idata, out / "posterior.nc")
-    write_atomic_text(out / "summary.json", json.dumps(summary, indent=1, default=float))
+    write_text(out / "summary.json", json.dumps(summary, indent=1, default=float))
     if result.convergence.converged:
         state_path.unlink(missing_ok=True)
     else:  # kept: a resumed run with a larger step limit continues the same chain
@@ -286,10 +286,6 @@ def infer(
         material_figures(out, dataset)
         log(f"{code}: figures in {out / 'figures'}")
     return summary
-
-
-def _fmt(x: float) -> str:
-    return f"{x:.3g}" if math.isfinite(x) else str(x)
 
 
 def index_markdown(
@@ -325,14 +321,16 @@ def index_markdown(
         ]
         for name, row in s["parameters"].items():
             lines.append(
-                f"| {name} | {s['units'].get(name, '')} | {_fmt(row['mean'])} | "
-                f"{_fmt(row['hdi_low'])} to {_fmt(row['hdi_high'])} | {conv['rhat'][name]:.3f} | "
-                f"{conv['ess_bulk'][name]:.0f} |"
+                f"| {name} | {s['units'].get(name, '')} | {format_number(row['mean'], nonfinite=None)} | "
+                f"{format_number(row['hdi_low'], nonfinite=None)} to "
+                f"{format_number(row['hdi_high'], nonfinite=None)} | "
+                f"{conv['rhat'][name]:.3f} | {conv['ess_bulk'][name]:.0f} |"
             )
         lines += ["", "| test | RMSE | max error | R² |", "|---|---|---|---|"]
         for test, q in s["fit_quality_posterior_mean"].items():
             lines.append(
-                f"| {test} | {_fmt(q['rmse'])} {q['unit']} | {_fmt(q['max_error'])} {q['unit']} | {q['r2']:.4f} |"
+                f"| {test} | {format_number(q['rmse'], nonfinite=None)} {q['unit']} | "
+                f"{format_number(q['max_error'], nonfinite=None)} {q['unit']} | {q['r2']:.4f} |"
             )
         reference = (references or {}).get(s["material"])
         ours = s["fit_quality_posterior_mean"].get("load_cycle")
@@ -344,12 +342,15 @@ def index_markdown(
                 "",
                 "| model | RMSE | max error | R² |",
                 "|---|---|---|---|",
-                f"| peano_bayes (posterior mean) | {_fmt(ours['rmse'])} N | {_fmt(ours['max_error'])} N | "
-                f"{ours['r2']:.4f} |",
+                f"| peano_bayes (posterior mean) | {format_number(ours['rmse'], nonfinite=None)} N | "
+                f"{format_number(ours['max_error'], nonfinite=None)} N | {ours['r2']:.4f} |",
             ]
             for name, label in (("sarosi", "Sarosi static, 12 coefficients"), ("veale", "Veale force balance")):
                 q = reference[name]["quality"]
-                lines.append(f"| {label} | {_fmt(q['rmse'])} N | {_fmt(q['max_error'])} N | {q['r2']:.4f} |")
+                lines.append(
+                    f"| {label} | {format_number(q['rmse'], nonfinite=None)} N | "
+                    f"{format_number(q['max_error'], nonfinite=None)} N | {q['r2']:.4f} |"
+                )
         t = s["timings_s"]
         lines += [
             "",
@@ -408,7 +409,7 @@ def reference_models(directory: Path, summary: dict, *, log=print) -> dict | Non
         return None
     log(f"{summary['material']}: fitting the reference models to the load cycles ...")
     comparison = reference_comparison(prepare(_select_tests(load(source), ["load_cycle"])))
-    write_atomic_text(path, json.dumps(comparison, indent=1))
+    write_text(path, json.dumps(comparison, indent=1))
     return comparison
 
 
@@ -419,7 +420,8 @@ def report_results(out_dir: str | Path, materials=BUNDLED_MATERIALS, *, n_draws:
     if present) and ``figures/``; across them: ``ranking.json``/``ranking.md``, ``figures/`` and ``index.md``.
     Returns the ranking (:func:`~peano_bayes.ranking.rank_materials`)."""
     from .figures import cross_material_figures, material_figures
-    from .metrics import evaluate_result, load_result, read_metrics
+    from .inference.results import load_result
+    from .metrics import evaluate_result, read_metrics
     from .ranking import rank_materials, ranking_markdown
 
     out_dir = Path(out_dir)
@@ -441,11 +443,11 @@ def report_results(out_dir: str | Path, materials=BUNDLED_MATERIALS, *, n_draws:
     prior_only = {name for m in metrics.values() for name, s in m["summary"].items() if s["from_prior"]}
     ranking = rank_materials({c: m["draws"] for c, m in metrics.items()}, from_prior=prior_only) if metrics else None
     if ranking:
-        write_atomic_text(out_dir / "ranking.json", json.dumps(ranking, indent=1))
-        write_atomic_text(out_dir / "ranking.md", "# Ranking\n\n" + ranking_markdown(ranking) + "\n")
+        write_text(out_dir / "ranking.json", json.dumps(ranking, indent=1))
+        write_text(out_dir / "ranking.md", "# Ranking\n\n" + ranking_markdown(ranking) + "\n")
         cross_material_figures(out_dir, results, metrics, ranking)
     steps = {c: (out_dir / c / "figures" / "step.png").exists() for c in finished}
-    write_atomic_text(out_dir / "index.md", index_markdown(summaries, metrics, ranking, references, steps))
+    write_text(out_dir / "index.md", index_markdown(summaries, metrics, ranking, references, steps))
     log(f"wrote {out_dir / 'index.md'}")
     return ranking or {}
 
@@ -491,7 +493,7 @@ def run_bundled(
 
     def finished(code, summary):
         summaries[code] = summary
-        write_atomic_text(out_dir / "index.md", index_markdown([summaries[c] for c in materials if c in summaries]))
+        write_text(out_dir / "index.md", index_markdown([summaries[c] for c in materials if c in summaries]))
 
     if jobs <= 1 or len(todo) <= 1:
         for code in todo:

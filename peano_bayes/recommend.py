@@ -226,7 +226,7 @@ def evaluate_candidates(spec: Spec, materials: dict, *, log=print) -> list[dict]
     Each candidate: ``material``, ``n_tubes``, ``tube_width_mm``, ``tube_length_mm``, ``probability`` of
     meeting every requirement, ``p_each`` (requirement -> probability it holds), ``margin`` (requirement ->
     median fraction of the bound to spare; negative means violated), ``binding`` and ``force_median_n``."""
-    from .metrics import parameter_draws, result_config
+    from .inference.results import parameter_draws, result_config
 
     req = spec.requirement
     out = []
@@ -315,7 +315,8 @@ def explain(candidate: dict, requirement: Requirement) -> str:
 def recommend(spec_path: str | Path, results_dir: str | Path | None = None, *, log=print) -> dict:
     """Load a spec and the material results it names, score every candidate; returns ``requirement``,
     ``candidates`` (best first, see :func:`evaluate_candidates`) and ``explanation`` of the top one."""
-    from .metrics import load_result, read_metrics
+    from .inference.results import load_result
+    from .metrics import read_metrics
 
     spec = load_spec(spec_path)
     root = Path(results_dir) if results_dir is not None else spec.results_dir

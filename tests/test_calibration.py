@@ -7,7 +7,7 @@ would."""
 import numpy as np
 import pytest
 
-from peano_bayes.inference.calibration import (
+from peano_bayes.validation.sbc import (
     RANK_DRAWS,
     base_posterior,
     coverage_table,

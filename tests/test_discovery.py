@@ -29,15 +29,6 @@ from peano_bayes.discovery.effects import (
     PHYSICS_EFFECTS,
 )
 from peano_bayes.discovery.fitting import ModelFit, _pointwise
-from peano_bayes.discovery.harness import (
-    HIDEABLE,
-    TRUTH_CONFIG,
-    TRUTH_PARAMS,
-    Case,
-    hidden_dataset,
-    score,
-    true_parameters,
-)
 from peano_bayes.discovery.model import (
     DEFAULT_BASE,
     NAMES,
@@ -47,8 +38,17 @@ from peano_bayes.discovery.model import (
     to_values,
 )
 from peano_bayes.discovery.workflow import Gates, identified, preference_order, strength_wald, within_two_se
-from peano_bayes.inference.calibration import wilson_interval
 from peano_bayes.inference.likelihood import predict, prepare
+from peano_bayes.validation.discovery_benchmark import (
+    HIDEABLE,
+    TRUTH_CONFIG,
+    TRUTH_PARAMS,
+    Case,
+    hidden_dataset,
+    score,
+    true_parameters,
+)
+from peano_bayes.validation.sbc import wilson_interval
 
 # One xdist worker runs this group, so one compilation of the superset model serves every test here.
 pytestmark = pytest.mark.xdist_group("discovery")

@@ -20,7 +20,8 @@ from peano_bayes.figures import (  # noqa: E402
     predictive_runs,
     published_data,
 )
-from peano_bayes.metrics import evaluate_result, load_result  # noqa: E402
+from peano_bayes.inference.results import load_result  # noqa: E402
+from peano_bayes.metrics import evaluate_result  # noqa: E402
 from peano_bayes.ranking import rank_materials  # noqa: E402
 
 # One xdist worker runs this group, so the session fixture `recovered` (a fit and a sampling run) is built once.

@@ -8,12 +8,11 @@ import pytest
 
 from peano_bayes.cli import main
 from peano_bayes.errors import PeanoBayesInputError
+from peano_bayes.inference.results import load_result, parameter_draws
 from peano_bayes.metrics import (
     STEP_METRICS,
     compare_published,
-    load_result,
     model_metrics,
-    parameter_draws,
     posterior_metrics,
 )
 

@@ -123,7 +123,7 @@ def test_response_time_is_contraction_over_step_speed_and_flagged_when_from_the_
     speed = [0.03] * (n // 2) + [0.01] * (n // 2)
     metrics = {"material": "TP", "draws": {"speed": speed}, "summary": {"speed": {"from_prior": True}}}
     (root / "TP" / "metrics.json").write_text(json.dumps(metrics))
-    from peano_bayes.metrics import load_result
+    from peano_bayes.inference.results import load_result
     from peano_bayes.recommend import _result_geometry
 
     l0 = float(_result_geometry(load_result(root / "TP")).flat_length_m)

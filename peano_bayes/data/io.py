@@ -14,7 +14,6 @@ import io
 import math
 import os
 import re
-import tempfile
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import tomli_w
 
+from ..atomic import replacing, write_into
 from ..errors import DataFormatError, did_you_mean
 from ..physics.geometry import Geometry
 from .dataset import Conditions, Dataset, Material, Run
@@ -97,16 +97,11 @@ def save(dataset: Dataset, path: str | os.PathLike) -> Path:
     csv_text = _csv_text(dataset)
     toml_text = tomli_w.dumps(_sidecar_document(dataset))
     csv_path.parent.mkdir(parents=True, exist_ok=True)
-    temporaries: list[Path] = []
-    try:
-        tmp_csv = _write_temporary(csv_path, csv_text, temporaries)
-        tmp_toml = _write_temporary(toml_path, toml_text, temporaries)
+    # Both files are written and checked before either replaces anything; on any failure both temporaries go.
+    with replacing(csv_path) as tmp_csv, replacing(toml_path) as tmp_toml:
+        write_into(tmp_csv, csv_text.encode("utf-8"))
+        write_into(tmp_toml, toml_text.encode("utf-8"))
         _read(tmp_csv, tmp_toml, str(csv_path), str(toml_path))
-        os.replace(tmp_toml, toml_path)
-        os.replace(tmp_csv, csv_path)
-    finally:
-        for tmp in temporaries:
-            tmp.unlink(missing_ok=True)
     return csv_path
 
 
@@ -584,15 +579,3 @@ def _sidecar_document(dataset: Dataset) -> dict:
         document[section].update({key: v for key, v in extra.items() if key not in document[section]})
     return document
 
-
-def _write_temporary(target: Path, text: str, temporaries: list[Path]) -> Path:
-    fd, name = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
-    tmp = Path(name)
-    temporaries.append(tmp)
-    with os.fdopen(fd, "w", encoding="utf-8", newline="") as f:
-        f.write(text)
-        f.flush()
-        os.fsync(f.fileno())
-    mode = target.stat().st_mode & 0o777 if target.exists() else 0o644
-    os.chmod(tmp, mode)
-    return tmp

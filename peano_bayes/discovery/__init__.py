@@ -3,7 +3,8 @@ the gap shrink (effect names: :data:`~peano_bayes.discovery.effects.LIBRARY`).
 
 Data flow: a rig :class:`~peano_bayes.data.Dataset` -> :func:`discovery_data` (one specimen, binned, whole
 runs split into fit and held-out, covariates) -> :func:`discover` (base fit, diagnosis, screening of the
-:data:`LIBRARY`, gates) -> :func:`write_report`. :mod:`.harness` validates it on data with hidden effects.
+:data:`LIBRARY`, gates) -> :func:`write_report`. :mod:`peano_bayes.validation.discovery_benchmark` validates it
+on data with hidden effects.
 """
 
 from .. import jax_config  # noqa: F401  (float64 before any JAX array is made; see peano_bayes.jax_config)

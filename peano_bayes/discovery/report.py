@@ -10,8 +10,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from .. import plots
+from ..atomic import write_text
 from ..figures import save
-from ..inference.results import write_atomic_text
+from ..formatting import format_number
 from .effects import ABSORBS, CONFUSABLE, LIBRARY
 
 _UNIT = {"load_cycle": "N", "blocking": "N", "stroke": "-", "step": "-"}
@@ -82,10 +83,6 @@ def residual_figure(result, path_stem: Path) -> list[Path]:
     return save(fig, path_stem)
 
 
-def _fmt(x) -> str:
-    return "n/a" if x is None or not np.isfinite(x) else f"{x:.3g}"
-
-
 def _absorbed_notes(final_model) -> list[str]:
     """A paragraph per effect of the final model that absorbs a library effect the model lacks (:data:`ABSORBS`)."""
     lines = []
@@ -153,7 +150,9 @@ def report_markdown(report: dict) -> str:
             f"- Its residual signature `{ev['signature']}` fell from {ev['signature_before']:.1f} to "
             f"{ev['signature_after']:.1f} (noise-level units).",
             "- Strength: "
-            + ", ".join(f"`{p}` = {_fmt(v['value'])} ± {_fmt(v['sd'])}" for p, v in step["parameters"].items())
+            + ", ".join(
+                f"`{p}` = {format_number(v['value'])} ± {format_number(v['sd'])}" for p, v in step["parameters"].items()
+            )
             + f" ({', '.join(f'{k} {z:.1f} sd from off' for k, z in ev['strength_z'].items())}; joint Wald "
             f"statistic {ev['strength_wald']:.1f}, threshold {ev['strength_wald_threshold']:.1f}).",
             f"- Largest correlation with a parameter already in the model: {ev['max_correlation_with_base']:.2f}.",
@@ -180,8 +179,8 @@ def report_markdown(report: dict) -> str:
             if b is None or a is None:
                 continue
             lines.append(
-                f"| {test} | {part.replace('_', '-')} | {_fmt(b['rmse'])} | {_fmt(a['rmse'])} | "
-                f"{_fmt(b['max_error'])} | {_fmt(a['max_error'])} | {_UNIT.get(test, '')} |"
+                f"| {test} | {part.replace('_', '-')} | {format_number(b['rmse'])} | {format_number(a['rmse'])} | "
+                f"{format_number(b['max_error'])} | {format_number(a['max_error'])} | {_UNIT.get(test, '')} |"
             )
     lines += ["", "## Candidates screened", ""]
     for i, screened in enumerate(report["screened"], 1):
@@ -203,8 +202,8 @@ def write_report(result, out: Path) -> list[Path]:
     """Write ``report.json``, ``report.md`` and ``figures/residuals.{png,pdf}`` into ``out`` (each atomic)."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    write_atomic_text(out / "report.json", json.dumps(result.report, indent=1, default=float))
-    write_atomic_text(out / "report.md", report_markdown(result.report))
+    write_text(out / "report.json", json.dumps(result.report, indent=1, default=float))
+    write_text(out / "report.md", report_markdown(result.report))
     return [out / "report.json", out / "report.md", *residual_figure(result, out / "figures" / "residuals")]
 
 

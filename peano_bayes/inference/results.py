@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
 from importlib import metadata
 from pathlib import Path
 
@@ -22,8 +21,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..atomic import replacing
+from ..errors import PeanoBayesInputError
+from ..physics import ModelConfig
 from .likelihood import group_log_likelihood
-from .posterior import Posterior
+from .posterior import STEP_ONLY_PARAMETERS, Posterior
+from .priors import prior_for
 from .sample import SampleResult
 
 MAX_DRAWS_PER_WALKER = 250
@@ -146,16 +149,10 @@ def _attrs(posterior: Posterior, result: SampleResult, seed: int, extra: dict | 
     }
 
 
-def write_atomic_text(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-
-
 def write_netcdf(idata, path: Path) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    idata.to_netcdf(str(tmp))
-    os.replace(tmp, path)
+    """Write ``idata`` to ``path`` as NetCDF, atomically (:func:`peano_bayes.atomic.replacing`)."""
+    with replacing(path) as tmp:
+        idata.to_netcdf(str(tmp))
 
 
 def parameter_table(idata, names, hdi_prob: float = 0.94) -> dict:
@@ -174,11 +171,84 @@ def parameter_table(idata, names, hdi_prob: float = 0.94) -> dict:
     }
 
 
+# --- reading a result -----------------------------------------------------------------------------------------
+
+
+def result_config(idata) -> ModelConfig:
+    """The model configuration a result was sampled with (its ``model_config`` attribute)."""
+    return ModelConfig(**json.loads(idata.posterior.attrs["model_config"]))
+
+
+def parameter_draws(idata, n_draws: int, seed: int = 0) -> tuple[list[dict], tuple[str, ...]]:
+    """``n_draws`` parameter sets [SI] of the typical specimen (specimen offset 0) from a result, evenly spaced
+    over the stored posterior, and the names drawn from the prior instead (see
+    :class:`~peano_bayes.metrics.PosteriorMetrics`).
+
+    Every name the result's configuration reads: posterior draw if sampled; else the ``fixed_parameters``
+    attribute or the nominal value (shape constants held in the fit); except step-only parameters
+    (:data:`~peano_bayes.inference.posterior.STEP_ONLY_PARAMETERS`) of a fit without the step test, which are
+    drawn from the material's prior file so the step metrics carry honest (prior) uncertainty."""
+    attrs = idata.posterior.attrs
+    config = result_config(idata)
+    material = attrs["material"]
+    post = idata.posterior.stack(sample=("chain", "draw"))
+    total = post.sizes["sample"]
+    if not 1 <= n_draws <= total:
+        raise PeanoBayesInputError(f"n_draws must be in [1, {total}] (the stored draws), got {n_draws}")
+    pick = np.linspace(0, total - 1, n_draws).round().astype(int)
+    fixed = {**config.nominal_parameters(), **json.loads(attrs.get("fixed_parameters", "{}"))}
+    names = config.parameter_names()
+    prior_only = tuple(n for n in names if n not in post and n in STEP_ONLY_PARAMETERS)
+    prior_values = {}
+    if prior_only:
+        prior = prior_for(material, config=config).select(prior_only)
+        prior_values = prior.sample_params(np.random.default_rng([seed, 7]), n_draws)
+    sets = []
+    for i, j in enumerate(pick):
+        params = {}
+        for n in names:
+            if n in post:
+                params[n] = float(post[n].values[j])
+            elif n in prior_values:
+                params[n] = float(np.asarray(prior_values[n])[i])
+            else:
+                params[n] = float(fixed[n])
+        sets.append(params)
+    return sets, prior_only
+
+
+
+def load_result(path: str | Path):
+    """The arviz InferenceData of a result: ``path`` is a ``posterior.nc`` file or a directory holding one.
+    Raises :class:`~peano_bayes.errors.PeanoBayesInputError` naming the file and what is wrong."""
+    path = Path(path)
+    nc = path / "posterior.nc" if path.is_dir() else path
+    if not nc.is_file():
+        raise PeanoBayesInputError(
+            f"{nc}: no such file; expected a result directory of 'peano-bayes fit' or its posterior.nc"
+        )
+    try:
+        idata = az.from_netcdf(str(nc))
+    except (OSError, ValueError) as err:
+        raise PeanoBayesInputError(f"{nc}: not a readable NetCDF result ({err})") from None
+    if "posterior" not in idata.groups():
+        raise PeanoBayesInputError(f"{nc}: has no posterior group; expected the posterior.nc of 'peano-bayes fit'")
+    missing = [k for k in ("material", "model_config") if k not in idata.posterior.attrs]
+    if missing:
+        raise PeanoBayesInputError(
+            f"{nc}: the posterior group lacks the attribute(s) {', '.join(missing)}; it was written by an older "
+            "peano_bayes or another tool; rerun 'peano-bayes fit'"
+        )
+    return idata
+
+
 __all__ = [
+    "load_result",
     "package_versions",
+    "parameter_draws",
     "parameter_table",
     "physical_draws",
+    "result_config",
     "to_inference_data",
-    "write_atomic_text",
     "write_netcdf",
 ]

@@ -32,6 +32,7 @@ the same numbers as a run that was never interrupted.
 from __future__ import annotations
 
 import dataclasses
+import io
 import json
 import os
 import time
@@ -44,6 +45,7 @@ import emcee
 import numpy as np
 from scipy import stats
 
+from ..atomic import write_bytes
 from ..defaults import DEFAULT_CHUNK, DEFAULT_MAX_STEPS, DEFAULT_WARMUP
 from ..errors import PeanoBayesError, PeanoBayesInputError
 from .posterior import Posterior
@@ -243,18 +245,15 @@ def initial_walkers(posterior: Posterior, centre: np.ndarray, covariance: np.nda
 
 
 def _save_state(path: Path, chain, log_prob, random_state, meta: dict) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "wb") as fh:
-        np.savez(
-            fh,
-            chain=chain,
-            log_prob=log_prob,
-            rng=np.frombuffer(json.dumps(_rng_to_json(random_state)).encode(), dtype=np.uint8),
-            meta=np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8),
-        )
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
+    buffer = io.BytesIO()
+    np.savez(
+        buffer,
+        chain=chain,
+        log_prob=log_prob,
+        rng=np.frombuffer(json.dumps(_rng_to_json(random_state)).encode(), dtype=np.uint8),
+        meta=np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8),
+    )
+    write_bytes(path, buffer.getvalue())
 
 
 def _rng_to_json(state) -> list:

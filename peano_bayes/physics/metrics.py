@@ -102,30 +102,69 @@ def stroke(strain) -> float:
     return float(np.median(strain[-n:]) - np.median(strain[:n]))
 
 
-def step_window(time_s, strain, supply_pa):
+#: With ``overshoot_fraction``, a step response overshoots if its peak exceeds its final value by this fraction of
+#: the rise (the value the measured Table 3 metrics use).
+OVERSHOOT_FRACTION = 0.01
+
+
+def _step_ends(strain):
+    """Initial and final strain of a step response: medians of its first and last 5 % (at least 3 samples)."""
+    n = max(len(strain) // 20, 3)
+    return np.median(strain[:n]), np.median(strain[-n:])
+
+
+def step_window(time_s, strain, supply_pa, *, overshoot_fraction: float | None = None):
     """Indices ``(start, stop)`` from the step edge to the first maximum of the strain (first overshoot peak).
 
-    The edge is the first sample where the supply passes halfway between its initial and final values; the
-    peak is the first local maximum after the edge, or the global maximum if the response never turns.
+    The edge is the first sample where the supply passes halfway between its initial and final values.
+
+    ``overshoot_fraction`` None (noise-free signals): the peak is the first local maximum after the edge, or the
+    global maximum if the response never turns. A fraction ``f`` (noisy, smoothed signals): the peak is the first
+    local maximum after the strain has risen halfway (sensor noise makes earlier local maxima), or the last
+    sample; a response whose peak exceeds its final value by less than ``f`` of the rise does not overshoot, and
+    the window ends at the first sample at ``1 - f`` of the rise (the slow tail would otherwise set the rms speed,
+    and noise would decide where it ends). ``stop`` is at least ``start + 2``.
     """
     supply_pa, strain = np.asarray(supply_pa, float), np.asarray(strain, float)
     half = 0.5 * (supply_pa[0] + supply_pa[-1])
     start = int(np.argmax(supply_pa >= half)) if supply_pa[-1] > supply_pa[0] else 0
-    rise = np.diff(strain[start:])
+    if overshoot_fraction is None:
+        search, fallback = start, start + int(np.argmax(strain[start:]))
+    else:
+        initial, final = _step_ends(strain)
+        rise = final - initial
+        search, fallback = int(np.argmax(strain - initial >= 0.5 * rise)), len(strain) - 1
+        if strain.max() - final < overshoot_fraction * rise:
+            settled = int(np.argmax(strain - initial >= (1 - overshoot_fraction) * rise))
+            return start, max(settled, start + 2)
+    rise = np.diff(strain[search:])
     turns = np.nonzero((rise[:-1] > 0) & (rise[1:] <= 0))[0]
-    stop = start + 1 + int(turns[0]) if len(turns) else start + int(np.argmax(strain[start:]))
+    stop = search + 1 + int(turns[0]) if len(turns) else fallback
     return start, max(stop, start + 2)
 
 
-def step_metrics(time_s, strain, supply_pa, flow_m3_per_s, load_n, flat_length_m, test_pressure_pa):
-    """Speed [m/s], power per pressure [W/MPa] and efficiency [-] of a step response (Table 3).
+def step_metrics(
+    time_s,
+    strain,
+    supply_pa,
+    flow_m3_per_s,
+    load_n,
+    flat_length_m,
+    test_pressure_pa,
+    *,
+    overshoot_fraction: float | None = None,
+):
+    """Speed [m/s], power per pressure [W/MPa], efficiency [-] and overshoot [-] of a step response (Table 3).
 
-    Speed: rms load speed from the step edge to the first overshoot peak. Power: rms mechanical power on the
-    inertial load, ``m (g + a) v``, over the same window. Efficiency: rms mechanical over rms fluid power
-    ``p_supply Q`` in the window (NaN when flow was not measured).
+    Speed: rms load speed over :func:`step_window` (``overshoot_fraction`` chooses its end), from the step edge to
+    the first overshoot peak. Power: rms mechanical power on the inertial load, ``m (g + a) v``, over the same
+    window. Efficiency: rms mechanical over rms fluid power ``p_supply Q`` in the window (NaN when flow was not
+    measured). Overshoot: peak over final strain, as a fraction of the rise (initial and final strain are the
+    medians of the first and last 5 % of the record). Noisy signals must be smoothed first: speed and
+    acceleration are finite differences.
     """
     time_s, strain = np.asarray(time_s, float), np.asarray(strain, float)
-    start, stop = step_window(time_s, strain, supply_pa)
+    start, stop = step_window(time_s, strain, supply_pa, overshoot_fraction=overshoot_fraction)
     v = np.gradient(strain * flat_length_m, time_s)
     a = np.gradient(v, time_s)
     window = slice(start, stop + 1)
@@ -137,8 +176,10 @@ def step_metrics(time_s, strain, supply_pa, flow_m3_per_s, load_n, flat_length_m
     else:
         fluid = np.asarray(supply_pa, float) * np.asarray(flow_m3_per_s, float)
         efficiency = rms_power / float(np.sqrt(np.mean(fluid[window] ** 2)))
+    initial, final = _step_ends(strain)
     return {
-        "speed_m_per_s": speed,
-        "power_w_per_mpa": rms_power / (test_pressure_pa / PA_PER_MPA),
+        "overshoot": float((strain.max() - final) / (final - initial)),
+        "speed": speed,
+        "power_per_pressure": rms_power / (test_pressure_pa / PA_PER_MPA),
         "efficiency": efficiency,
     }

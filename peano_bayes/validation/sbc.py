@@ -20,13 +20,13 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import stats
 
+from ..inference.laplace import posterior_mode
+from ..inference.likelihood import prepare
+from ..inference.posterior import Posterior, build_posterior
+from ..inference.priors import prior_for
+from ..inference.sample import sample
 from ..physics import DEFAULT_CONFIG
 from ..rig import RigNoise, RigSimulationError, simulate_dataset
-from .laplace import posterior_mode
-from .likelihood import prepare
-from .posterior import Posterior, build_posterior
-from .priors import prior_for
-from .sample import sample
 
 SBC_MATERIAL = "TP"
 SBC_FREE = ("tensile_ka_n_per_m", "bending_k1_n", "friction_pressure_fraction")

@@ -1,4 +1,4 @@
-"""Validation of discovery on virtual-rig data with a hidden effect (research/DISCREPANCY.md section 4).
+"""Validation of discovery on virtual-rig data with a hidden effect: the effect is known, discovery must name it.
 
 A :class:`Case` says what the rig hides: one library effect at a signal-to-noise ratio, none, two effects, or
 slow load-cell drift (an effect outside the library). :func:`hidden_dataset` simulates it; the label never
@@ -25,11 +25,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..data import Dataset
+from ..discovery.effects import CONFUSABLE, OPEN_ORIFICE_M2, PHYSICS_EFFECTS
+from ..discovery.model import DEFAULT_BASE, NAMES, ModelSpec, model_spec
 from ..inference.likelihood import OBSERVED, SPECIMEN_SCALED
 from ..physics import ModelConfig
 from ..rig import RigNoise, RigProtocol, RigSimulationError, simulate_dataset
-from .effects import CONFUSABLE, OPEN_ORIFICE_M2, PHYSICS_EFFECTS
-from .model import DEFAULT_BASE, NAMES, ModelSpec, model_spec
 
 MATERIAL = "PC"
 TRUTH_CONFIG = ModelConfig(bending=True, tensile=True, extension=False, friction="none")
@@ -48,7 +48,7 @@ REFERENCE_FORCE_SD_N = 0.2
 #: Load-cell drift of the out-of-library case [N/s] (about 0.7 N over one specimen's session).
 DRIFT_N_PER_S = 0.005
 
-#: Effects the harness can hide: (quirks switched on, parameters at strength s).
+#: Effects the benchmark can hide: (quirks switched on, parameters at strength s).
 REFERENCE = {
     "hysteresis": (
         ("hysteresis",),
