@@ -1,14 +1,14 @@
 """How much of each hidden effect the base model can absorb (why some effects are missed at SNR 2).
 
-The benchmark's SNR (peano_bayes.validation.discovery_benchmark) is
-``max over tests of RMS(y_with - y_without) / sigma`` at *equal* base parameters. Discovery, though, sees only what is left after the base model (tensile + bending
-stiffness, free) is refitted: the part of the effect's signal the base cannot mimic. This script measures that
-part. For each hideable effect at the strength the final benchmark used for SNR 2 (``--strengths``, default the
-current final run's ``experiments/discrepancy-10000/strengths.json``), it simulates the harness's rig data with
-the load-cell noise shrunk ``--shrink`` times (so the fit sees the same relative weights of force and strain
-tests but noise does not blur the misfit), fits the base model from four starts and the base plus the hidden
-effect from the truth, and reports per test the RMS of the binned misfit on the fitted and held-out runs, in
-units of the rig's per-sample noise at 0.2 N (the SNR's sigma):
+The benchmark's SNR (peano_bayes.validation.discovery_benchmark) is ``max over tests of RMS(y_with - y_without) /
+sigma`` at *equal* base parameters. Discovery, though, sees only what is left after the base model (tensile +
+bending stiffness, free) is refitted: the part of the effect's signal the base cannot mimic. This script measures
+that part. For each hideable effect at the strength the final benchmark used for SNR 2 (``--strengths``, default the
+current final run's ``experiments/discrepancy-10000/strengths.json``), it simulates the harness's rig data with the
+load-cell noise shrunk ``--shrink`` times (so the fit sees the same relative weights of force and strain tests but
+noise does not blur the misfit), fits the base model from four starts and the base plus the hidden effect from the
+truth, and reports per test the RMS of the binned misfit on the fitted and held-out runs, in units of the rig's
+per-sample noise at 0.2 N (the SNR's sigma):
 
 - ``snr_nominal``: the benchmark's SNR of that test (signal at equal base parameters);
 - ``snr_left_base``: what the refitted base leaves (the signal discovery can see);

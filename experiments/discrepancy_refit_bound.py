@@ -2,11 +2,10 @@
 
 The benchmark scores a correct detection by ``RMSE after / before`` on the held-out runs of the test with the
 largest gap before (``peano_bayes.validation.discovery_benchmark.score``); the target is <= 0.5. A bound with the
-base at the *true* parameters would overstate the gap a real "before" leaves: the benchmark's base is refitted and absorbs
-part of the effect. This script measures the
-ratio with the same refits the workflow makes, on data whose load-cell and strain noise are shrunk ``--shrink``
-times (the pressure sensors keep the rig's noise, so input denoising leaves its real floor), per test, on the
-held-out bins [signal unit]:
+base at the *true* parameters would overstate the gap a real "before" leaves: the benchmark's base is refitted and
+absorbs part of the effect. This script measures the ratio with the same refits the workflow makes, on data whose
+load-cell and strain noise are shrunk ``--shrink`` times (the pressure sensors keep the rig's noise, so input
+denoising leaves its real floor), per test, on the held-out bins [signal unit]:
 
 - ``gap_base``: RMS misfit of the base (tensile + bending stiffness) refitted from four starts, as discovery
   fits it: what the data show of the effect once the base has absorbed what it can;
