@@ -46,6 +46,7 @@ from .errors import PeanoBayesInputError
 from .formatting import format_number
 from .inference.posterior import STEP_ONLY_PARAMETERS
 from .inference.results import load_result, parameter_draws, result_config
+from .materials import MATERIALS, MaterialSpec
 from .physics import DEFAULT_CONFIG, PAPER_GEOMETRY, Geometry, LoadCycle, ModelConfig, simulate_load_cycle
 from .physics import metrics as m
 from .rig import RigNoise, RigSimulationError, apply_quirks, simulate_dataset
@@ -220,6 +221,27 @@ class PosteriorMetrics:
         return out
 
 
+def protocol_material(idata) -> str | MaterialSpec:
+    """The material whose test protocol a result's metrics are simulated under: its Table 4 code, or, for a
+    material of one's own, a :class:`~peano_bayes.materials.MaterialSpec` at the conditions of its data file
+    (the result's ``conditions`` attribute: test pressure, step load, start tension)."""
+    attrs = idata.posterior.attrs
+    code = attrs["material"]
+    if code in MATERIALS or "conditions" not in attrs:
+        return code
+    c = json.loads(attrs["conditions"])
+    return MaterialSpec(
+        code,
+        code,
+        code,
+        "a material of one's own",
+        matrix="unknown",
+        test_pressure_pa=c["test_pressure_pa"],
+        step_load_n=c["step_load_n"],
+        start_tension_n=c["start_tension_n"],
+    )
+
+
 def posterior_metrics(
     idata, *, n_draws: int = 100, seed: int = 0, progress: Callable | None = None
 ) -> PosteriorMetrics:
@@ -227,21 +249,21 @@ def posterior_metrics(
     protocol simulated noise-free for ``n_draws`` posterior draws
     (:func:`~peano_bayes.inference.results.parameter_draws`), each measured as
     the rig would be (:func:`model_metrics`). ``progress`` wraps the draw iterator (e.g. ``tqdm``)."""
-    material = idata.posterior.attrs["material"]
+    protocol = protocol_material(idata)
     config = result_config(idata)
     sets, prior_only = parameter_draws(idata, n_draws, seed)
     draws = {name: np.full(n_draws, np.nan) for name in METRIC_UNITS}
     failed = 0
     for i, params in enumerate(progress(sets) if progress else sets):
         try:
-            values = model_metrics(material, params, config=config)
+            values = model_metrics(protocol, params, config=config)
         except RigSimulationError:
             failed += 1
             continue
         for name, value in values.items():
             draws[name][i] = value
     from_prior = STEP_METRICS if any(n in STEP_ONLY_PARAMETERS for n in prior_only) else ()
-    return PosteriorMetrics(material, draws, failed, prior_only, from_prior)
+    return PosteriorMetrics(idata.posterior.attrs["material"], draws, failed, prior_only, from_prior)
 
 
 def published_metrics(material: str, path: str | Path | None = None) -> list[dict]:

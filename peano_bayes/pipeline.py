@@ -244,7 +244,12 @@ def infer(
         posterior,
         result,
         seed=seed,
-        attrs={"material": code, "dataset": str(dataset.source_path), "prior": str(prior.label)},
+        attrs={
+            "material": code,
+            "dataset": str(dataset.source_path),
+            "prior": str(prior.label),
+            "conditions": json.dumps(dataclasses.asdict(dataset.conditions)),
+        },
     )
     # Fit quality at the posterior mean in theta (unconstrained) space, specimen offsets included.
     theta_mean = result.kept().reshape(-1, posterior.ndim).mean(axis=0)

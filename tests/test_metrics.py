@@ -14,6 +14,7 @@ from peano_bayes.metrics import (
     compare_published,
     model_metrics,
     posterior_metrics,
+    protocol_material,
 )
 
 # One xdist worker runs this group, so the session fixture `recovered` (a fit and a sampling run) is built once.
@@ -37,6 +38,28 @@ def test_parameter_draws_take_sampled_fixed_and_prior_values(result_dir, recover
     assert min(values) >= draws["tensile_ka_n_per_m"].min() and max(values) <= draws["tensile_ka_n_per_m"].max()
     assert all(s["extension_k_n_per_m"] == truth["extension_k_n_per_m"] for s in sets)  # held at the fit's value
     assert len({s["orifice_area_m2"] for s in sets}) == 5  # prior draws, not one value
+
+
+def test_unfitted_parameters_come_from_the_prior_the_fit_used(result_dir, tmp_path):
+    """A result of one's own material (no bundled prior, no Table 4 conditions) draws its unfitted step
+    parameters from its own prior file and simulates the protocol at its own data file's conditions."""
+    prior = tmp_path / "mine.toml"
+    prior.write_text(
+        '[meta]\nmaterial = "VM"\nextends = "textile_composite.toml"\n\n[parameters.orifice_area_m2]\n'
+        'distribution = "uniform"\nlow = 2.0e-6\nhigh = 2.1e-6\nunit = "m^2"\nprovenance = "test"\n'
+    )
+    idata = load_result(result_dir)
+    idata.posterior.attrs.update(
+        material="VM",
+        prior=str(prior),
+        conditions=json.dumps({"fluid": "water", "test_pressure_pa": 1.5e5, "step_load_n": 20.0,
+                               "start_tension_n": 30.0}),
+    )
+    sets, prior_only = parameter_draws(idata, 4, seed=1)
+    assert "orifice_area_m2" in prior_only
+    assert all(2.0e-6 <= s["orifice_area_m2"] <= 2.1e-6 for s in sets)  # from mine.toml, not TP's prior
+    spec = protocol_material(idata)
+    assert (spec.code, spec.test_pressure_pa, spec.step_load_n, spec.start_tension_n) == ("VM", 1.5e5, 20.0, 30.0)
 
 
 @pytest.mark.slow

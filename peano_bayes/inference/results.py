@@ -26,7 +26,7 @@ from ..errors import PeanoBayesInputError
 from ..physics import ModelConfig
 from .likelihood import group_log_likelihood
 from .posterior import STEP_ONLY_PARAMETERS, Posterior
-from .priors import prior_for
+from .priors import load_prior
 from .sample import SampleResult
 
 MAX_DRAWS_PER_WALKER = 250
@@ -187,7 +187,8 @@ def parameter_draws(idata, n_draws: int, seed: int = 0) -> tuple[list[dict], tup
     Every name the result's configuration reads: posterior draw if sampled; else the ``fixed_parameters``
     attribute or the nominal value (shape constants held in the fit); except step-only parameters
     (:data:`~peano_bayes.inference.posterior.STEP_ONLY_PARAMETERS`) of a fit without the step test, which are
-    drawn from the material's prior file so the step metrics carry honest (prior) uncertainty."""
+    drawn from the prior the fit used (the result's ``prior`` attribute: a file or a material code) so the step
+    metrics carry honest (prior) uncertainty."""
     attrs = idata.posterior.attrs
     config = result_config(idata)
     material = attrs["material"]
@@ -201,7 +202,8 @@ def parameter_draws(idata, n_draws: int, seed: int = 0) -> tuple[list[dict], tup
     prior_only = tuple(n for n in names if n not in post and n in STEP_ONLY_PARAMETERS)
     prior_values = {}
     if prior_only:
-        prior = prior_for(material, config=config).select(prior_only)
+        # The prior the fit used (a file of one's own, or the material's bundled prior for older results).
+        prior = load_prior(attrs.get("prior", material)).for_config(config).select(prior_only)
         prior_values = prior.sample_params(np.random.default_rng([seed, 7]), n_draws)
     sets = []
     for i, j in enumerate(pick):
