@@ -292,7 +292,15 @@ def fit_command(args):
 
     options = _check_sampling(args)
     dataset = load(bundled.resolve_dataset(args.data))  # validate before anything is written
-    summary = infer(dataset, args.out, resume=args.resume, prior=args.prior, label=args.label, **options)
+    summary = infer(
+        dataset,
+        args.out,
+        resume=args.resume,
+        prior=args.prior,
+        label=args.label,
+        figures=not args.no_figures,
+        **options,
+    )
     report = _report(summary)
     out = Path(args.out) / report["label"]
     if report["converged"]:
@@ -320,6 +328,7 @@ def _fit_arguments(p):
         "--label", metavar="NAME", default=None, help="name of the result folder (default: the data file's stem)"
     )
     p.add_argument("--resume", action="store_true", help="continue an interrupted run from its saved state")
+    p.add_argument("--no-figures", action="store_true", help="skip the figures (predictive band, corner plot)")
     _sampling_arguments(p)
 
 
@@ -457,7 +466,8 @@ def recommend_command(args):
     from .figures import recommendation_figure
     from .recommend import recommend, recommendation_markdown
 
-    report = recommend(args.spec, args.results)  # validates the spec and every result before writing
+    # validates the spec and every result before writing
+    report = recommend(args.spec, args.results, mount_compliance_m_per_n=args.mount_compliance, seed=args.seed)
     spec = Path(args.spec)
     out = Path(args.out) if args.out else spec.parent
     out.mkdir(parents=True, exist_ok=True)
@@ -477,6 +487,14 @@ def _recommend_arguments(p):
         "--results", default=None, metavar="DIR", help="material results (default: the spec's [results] dir)"
     )
     p.add_argument("--out", default=None, metavar="DIR", help="where the outputs go (default: beside the spec)")
+    p.add_argument(
+        "--mount-compliance",
+        type=float,
+        default=0.0,
+        metavar="M_PER_N",
+        help="the design's mount compliance [m/N] in place of the rig's (default: 0, a stiff mount)",
+    )
+    p.add_argument("--seed", type=int, default=0, help="seed of the new-specimen draws (default: 0)")
 
 
 recommend_command.arguments = _recommend_arguments

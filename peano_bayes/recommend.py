@@ -6,10 +6,16 @@ A requirement (``[requirement]`` of a spec TOML) asks for at least ``force_n`` [
 inflated thickness (``max_thickness_mm``) and its hysteresis loss (``max_hysteresis`` [-]). Candidates
 (``[candidates]``) are every combination of material (a result directory each) x ``n_tubes`` x
 ``tube_width_mm`` x ``tube_length_mm``. Each is scored by the posterior probability of meeting every
-requirement at once, over joint posterior draws of its material:
+requirement at once, over joint posterior draws of its material, for a **new specimen** of it:
 
-- force: :func:`~peano_bayes.physics.static_force` of the relaxed muscle at the maximum pressure, with the
-  material's parameters carried to the candidate geometry by :func:`~peano_bayes.physics.scale_parameters`;
+- force: the **operating force**, what the muscle delivers while contracting against its load. At the maximum
+  pressure the muscle is stretched :data:`OPERATING_STRETCH` past the required contraction and contracts back
+  to it at :data:`OPERATING_RATE_PER_S` (:func:`operating_forces`), so friction and the viscoelastic elements
+  act against the motion, as on the lower branch of a load cycle. The material's parameters are carried to the
+  candidate geometry by :func:`~peano_bayes.physics.scale_parameters`; a new specimen's wall stiffnesses get
+  a factor ``exp(specimen_log_sd z)``, ``z ~ N(0, 1)``, drawn with each posterior draw (the between-specimen
+  spread of the fit). Design conditions, not rig conditions: the rig's mount compliance is replaced by the
+  design's (default 0, a stiff mount; ``mount_compliance_m_per_n``).
 - hysteresis loss: the material's posterior predictive Table 3 hysteresis (``metrics.json``; paired with the
   force by draw). Hysteresis is a ratio of energies and is taken as independent of geometry (an assumption);
 - response time (``max_response_time_s``): the time to the required contraction at the material's posterior
@@ -17,10 +23,13 @@ requirement at once, over joint posterior draws of its material:
   contract together, so the strain rate, not the end speed, is taken as independent of the tube count (an
   assumption), under the paper's step load. When the fit had no step test the inlet and damping come from
   their prior, so this requirement is scored on prior knowledge, and the report says so;
-- width, length, thickness: geometry alone. Thickness is the fully inflated bound 2 w / pi of round tubes.
+- width, length: geometry alone; thickness: :func:`thickness_m`, the fully inflated tube plus its walls.
 
-Candidates are ranked by that probability, then by the force margin; each carries the median margin of every
-requirement and its *binding* requirement, the one least likely to hold.
+A candidate beyond a limit of its material (``bundled/data/design_limits.toml``: above the highest tested
+pressure, where the posterior would extrapolate, or above a burst pressure the paper reports) is infeasible:
+its probability is 0 and ``infeasible`` says why. Candidates are ranked by probability, then by the force
+margin; each carries every requirement's probability and median margin, the force margin's 94 % interval and
+its *binding* requirement, the one least likely to hold.
 """
 
 from __future__ import annotations
@@ -37,9 +46,23 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import bundled
 from .errors import PeanoBayesInputError, did_you_mean
-from .physics import Geometry, scale_parameters, static_force
+from .inference.likelihood import SPECIMEN_SCALED
+from .inference.posterior import SPECIMEN_SD
+from .materials import MATERIALS
+from .physics import Geometry, LoadCycle, scale_parameters, simulate_load_cycle
 from .physics.pouch import IDEAL_FREE_STRAIN
+
+#: Strain [-] the muscle is stretched past the required contraction before contracting back to it, so that
+#: friction and the viscoelastic elements are in their contracting state when the force is read.
+OPERATING_STRETCH = 0.05
+#: Strain rate [1/s] of that motion: quasi-static, about the rig's load-cycle rate (0.005-0.01 /s).
+OPERATING_RATE_PER_S = 0.01
+#: Samples of the simulated motion (stretch then contract).
+_OPERATING_SAMPLES = 101
+#: Probability mass of the reported intervals.
+HDI_PROB = 0.94
 
 _REQUIREMENT_KEYS = {
     "force_n": "minimum force [N]",
@@ -191,45 +214,157 @@ def load_spec(path: str | Path) -> Spec:
     )
 
 
-def thickness_m(geometry: Geometry) -> float:
-    """Inflated thickness bound [m]: round tubes (half-angle pi/2) bulge both walls to 2 w / pi."""
-    return 2.0 * geometry.tube_width_m / math.pi
+@functools.cache
+def design_limits() -> dict:
+    """The bundled ``design_limits.toml``: ``construction`` (wall build-up data) and ``pressure`` (per material
+    ``max_tested_kpa``, optional ``burst_kpa``, ``source``)."""
+    return tomllib.loads((bundled.DATA_DIR / "design_limits.toml").read_text(encoding="utf-8"))
 
 
-def _geometry_checks(req: Requirement, g: Geometry) -> dict[str, float]:
+def wall_thickness_m(code: str) -> float | None:
+    """One wall's thickness [m] of a bundled material, from its construction: film (plastics) or silicone liner
+    (composites) plus its textile wraps, each ``areal density / (fibre density x fibre volume fraction)``;
+    ``None`` for a material of one's own."""
+    if code not in MATERIALS:
+        return None
+    spec, c = MATERIALS[code], design_limits()["construction"]
+    composite = spec.film_thickness_m is None
+    base = 1e-3 * c["composite_liner_mm"] if composite else spec.film_thickness_m
+    if spec.textile is None:
+        return base
+    wraps = c["composite_textile_wraps"] if composite else c["plastic_textile_wraps"]
+    layer = spec.textile_areal_density_kg_per_m2 / (
+        c["fibre_density_kg_per_m3"][spec.textile] * c["fabric_fibre_volume_fraction"]
+    )
+    return base + wraps * layer
+
+
+def thickness_m(geometry: Geometry, code: str | None = None) -> float:
+    """Fully inflated thickness [m] of a muscle of material ``code``: the tube's inextensible internal perimeter
+    ``2 (w + h0)`` (``h0`` the uninflated internal height: 3 mm for the composites' foam core, 0 for the
+    sealed films) rounded to a circle of diameter ``2 (w + h0) / pi``, plus both walls
+    (:func:`wall_thickness_m`). For a material of one's own (walls unknown) the bound ``2 w / pi`` of thin
+    walls and no internal height."""
+    walls = wall_thickness_m(code) if code is not None else None
+    if walls is None:
+        return 2.0 * geometry.tube_width_m / math.pi
+    composite = MATERIALS[code].film_thickness_m is None
+    h0 = 1e-3 * design_limits()["construction"]["composite_core_height_mm"] if composite else 0.0
+    return 2.0 * (geometry.tube_width_m + h0) / math.pi + 2.0 * walls
+
+
+def limit_violations(code: str, max_pressure_pa: float) -> list[str]:
+    """Why a material cannot be used at ``max_pressure_pa``: above its highest tested pressure or a reported
+    burst pressure (:func:`design_limits`); empty when it can, or for a material with no bundled limits."""
+    limits = design_limits()["pressure"].get(code)
+    if limits is None:
+        return []
+    kpa = max_pressure_pa / 1e3
+    reasons = []
+    if "burst_kpa" in limits and kpa > limits["burst_kpa"]:
+        reasons.append(
+            f"{kpa:g} kPa is above {code}'s burst pressure of {limits['burst_kpa']:g} kPa ({limits['source']})"
+        )
+    if kpa > limits["max_tested_kpa"]:
+        reasons.append(
+            f"{kpa:g} kPa is above the {limits['max_tested_kpa']:g} kPa {code} was tested at: the posterior would "
+            f"extrapolate ({limits['source']})"
+        )
+    return reasons
+
+
+def _geometry_checks(req: Requirement, g: Geometry, code: str) -> dict[str, float]:
     """Requirement -> margin (fraction of the bound left; negative = violated) of the geometric requirements."""
     margins = {}
     for name, bound, value in (
         ("width", req.max_width_m, g.tube_length_m),
         ("length", req.max_length_m, g.flat_length_m),
-        ("thickness", req.max_thickness_m, thickness_m(g)),
+        ("thickness", req.max_thickness_m, thickness_m(g, code)),
     ):
         if bound is not None:
             margins[name] = 1.0 - value / bound
     return margins
 
 
+def operating_strain(contraction: float) -> tuple[np.ndarray, np.ndarray]:
+    """Time [s] and imposed strain [-] (n,) of the operating motion: from ``contraction`` stretched by
+    :data:`OPERATING_STRETCH`, then contracting back to it, at :data:`OPERATING_RATE_PER_S`."""
+    leg_s = OPERATING_STRETCH / OPERATING_RATE_PER_S
+    time_s = np.linspace(0.0, 2.0 * leg_s, _OPERATING_SAMPLES)
+    strain = np.interp(time_s, [0.0, leg_s, 2.0 * leg_s], [contraction, contraction - OPERATING_STRETCH, contraction])
+    return time_s, strain
+
+
 @functools.partial(jax.jit, static_argnames="config")
-def _static_forces(stacked, pressure_pa, strain, geometry, config):
-    return jax.vmap(lambda p: static_force(p, pressure_pa, strain, config=config, geometry=geometry))(stacked)
+def _operating_forces(stacked, time_s, strain, pressure_pa, geometry, config):
+    protocol = LoadCycle(time_s, strain, jnp.full_like(time_s, pressure_pa))
+    return jax.vmap(lambda p: simulate_load_cycle(p, protocol, config=config, geometry=geometry).force_n[-1])(stacked)
 
 
-def _force_draws(stacked: dict, config, reference: Geometry, target: Geometry, req: Requirement) -> np.ndarray:
-    """(n,) force [N] at the required contraction and maximum pressure; ``stacked``: name -> (n,) draws."""
-    scaled = scale_parameters(stacked, reference, target)
-    return np.asarray(_static_forces(scaled, req.max_pressure_pa, req.contraction, target, config))
+def operating_forces(stacked: dict, config, geometry: Geometry, pressure_pa: float, contraction: float) -> np.ndarray:
+    """(n,) force [N] a muscle of ``geometry`` delivers at ``contraction`` and ``pressure_pa`` while contracting
+    against its load (:func:`operating_strain`); ``stacked``: parameter name -> (n,) draws [SI] for that
+    geometry."""
+    time_s, strain = operating_strain(contraction)
+    return np.asarray(
+        _operating_forces(stacked, jnp.asarray(time_s), jnp.asarray(strain), pressure_pa, geometry, config)
+    )
 
 
-def evaluate_candidates(spec: Spec, materials: dict, *, log=print) -> list[dict]:
-    """Every candidate of ``spec`` over ``materials`` (code -> ``(idata, metrics or None)``), best first.
+def new_specimen_draws(idata, param_sets: list[dict], *, seed: int = 0) -> dict:
+    """Stacked parameter draws (name -> (n,)) of a new specimen of the material: each of ``param_sets`` (the
+    typical specimen, :func:`~peano_bayes.inference.results.parameter_draws`) with its wall stiffnesses
+    (:data:`~peano_bayes.inference.likelihood.SPECIMEN_SCALED`) times ``exp(specimen_log_sd z)``, ``z ~ N(0, 1)``,
+    the spread taken at the same posterior draw. A fit of one specimen has no spread: the draws are unchanged."""
+    from .inference.results import draw_indices
+
+    stacked = {k: np.asarray([p[k] for p in param_sets], float) for k in param_sets[0]}
+    post = idata.posterior
+    if SPECIMEN_SD not in post:
+        return stacked
+    sd = post[SPECIMEN_SD].stack(sample=("chain", "draw")).values
+    sd = sd[draw_indices(sd.size, len(param_sets))]
+    factor = np.exp(sd * np.random.default_rng([seed, 11]).standard_normal(sd.size))
+    return {k: v * factor if k in SPECIMEN_SCALED else v for k, v in stacked.items()}
+
+
+def _design_conditions(stacked: dict, config, mount_compliance_m_per_n: float) -> tuple[dict, list[str]]:
+    """The draws with the rig's artefacts replaced by the design's conditions, and what was replaced."""
+    removed = []
+    if config.mount:
+        rig = stacked["mount_compliance_m_per_n"]
+        stacked = {**stacked, "mount_compliance_m_per_n": np.full_like(rig, mount_compliance_m_per_n)}
+        removed.append(
+            f"the rig's mount compliance (median {float(np.median(rig)):.3g} m/N) replaced by the design's "
+            f"{mount_compliance_m_per_n:g} m/N"
+        )
+    return stacked, removed
+
+
+def _interval(values: np.ndarray) -> list[float]:
+    finite = values[np.isfinite(values)]
+    if finite.size < 2:
+        return [float("nan"), float("nan")]
+    import arviz as az
+
+    return [float(x) for x in az.hdi(finite, hdi_prob=HDI_PROB)]
+
+
+def evaluate_candidates(
+    spec: Spec, materials: dict, *, mount_compliance_m_per_n: float = 0.0, seed: int = 0, log=print
+) -> tuple[list[dict], list[str]]:
+    """Every candidate of ``spec`` over ``materials`` (code -> ``(idata, metrics or None)``), best first, and
+    the rig artefacts removed from the predictions (see the module docstring).
 
     Each candidate: ``material``, ``n_tubes``, ``tube_width_mm``, ``tube_length_mm``, ``probability`` of
-    meeting every requirement, ``p_each`` (requirement -> probability it holds), ``margin`` (requirement ->
-    median fraction of the bound to spare; negative means violated), ``binding`` and ``force_median_n``."""
+    meeting every requirement (0 if infeasible), ``p_each`` (requirement -> probability it holds), ``margin``
+    (requirement -> median fraction of the bound to spare; negative means violated), ``force_margin_interval``
+    (94 % interval of the force margin), ``binding``, ``force_median_n``, ``force_interval_n`` (94 %) and
+    ``infeasible`` (the limits it breaks, empty if none)."""
     from .inference.results import parameter_draws, result_config
 
     req = spec.requirement
-    out = []
+    out, removed = [], []
     for code, (idata, metrics) in materials.items():
         config = result_config(idata)
         paired = {}  # requirement -> (n,) metric draws, paired with the force draws by index
@@ -248,12 +383,17 @@ def evaluate_candidates(spec: Spec, materials: dict, *, log=print) -> list[dict]
             n_draws = len(paired[name])  # the same evenly spaced posterior draws, so they pair by index
         total = idata.posterior.sizes["chain"] * idata.posterior.sizes["draw"]
         param_sets, _ = parameter_draws(idata, min(n_draws, total))
-        stacked = {k: jnp.asarray([p[k] for p in param_sets]) for k in param_sets[0]}
+        stacked, artefacts = _design_conditions(
+            new_specimen_draws(idata, param_sets, seed=seed), config, mount_compliance_m_per_n
+        )
+        removed += [f"{code}: {a}" for a in artefacts]
         reference = _result_geometry(idata)
-        log(f"{code}: {len(param_sets)} posterior draws over the candidate geometries")
+        infeasible = limit_violations(code, req.max_pressure_pa)
+        log(f"{code}: {len(param_sets)} posterior draws (new specimens) over the candidate geometries")
         for n, w, length in itertools.product(spec.n_tubes, spec.tube_width_m, spec.tube_length_m):
             target = Geometry(n_tubes=n, tube_width_m=w, tube_length_m=length)
-            force = _force_draws(stacked, config, reference, target, req)
+            scaled = {k: jnp.asarray(v) for k, v in scale_parameters(stacked, reference, target).items()}
+            force = operating_forces(scaled, config, target, req.max_pressure_pa, req.contraction)
             holds = {"force": np.isfinite(force) & (force >= req.force_n)}
             margin = {"force": float(np.median(force) / req.force_n - 1.0)}
             if "hysteresis" in paired:
@@ -264,11 +404,11 @@ def evaluate_candidates(spec: Spec, materials: dict, *, log=print) -> list[dict]
                 t = req.contraction * float(reference.flat_length_m) / paired["response_time"][: len(force)]
                 holds["response_time"] = np.isfinite(t) & (t <= req.max_response_time_s)
                 margin["response_time"] = float(1.0 - np.nanmedian(t) / req.max_response_time_s)
-            for name, m in _geometry_checks(req, target).items():
+            for name, m in _geometry_checks(req, target, code).items():
                 holds[name] = np.full(force.shape, m >= 0.0)
                 margin[name] = m
             p_each = {name: float(np.mean(h)) for name, h in holds.items()}
-            joint = float(np.mean(np.all(np.stack(list(holds.values())), axis=0)))
+            joint = 0.0 if infeasible else float(np.mean(np.all(np.stack(list(holds.values())), axis=0)))
             binding = min(p_each, key=lambda k: (p_each[k], margin[k]))
             out.append(
                 dict(
@@ -279,12 +419,15 @@ def evaluate_candidates(spec: Spec, materials: dict, *, log=print) -> list[dict]
                     probability=joint,
                     p_each=p_each,
                     margin=margin,
+                    force_margin_interval=[x / req.force_n - 1.0 for x in _interval(force)],
                     binding=binding,
                     force_median_n=float(np.median(force)),
+                    force_interval_n=_interval(force),
+                    infeasible=infeasible,
                 )
             )
-    out.sort(key=lambda c: (-c["probability"], -c["margin"]["force"]))
-    return out
+    out.sort(key=lambda c: (bool(c["infeasible"]), -c["probability"], -c["margin"]["force"]))
+    return out, removed
 
 
 def _result_geometry(idata) -> Geometry:
@@ -300,10 +443,14 @@ def explain(candidate: dict, requirement: Requirement) -> str:
     """One sentence on why a candidate ranks where it does."""
     c = candidate
     design = f"{c['material']} with {c['n_tubes']} tubes of {c['tube_width_mm']:g} x {c['tube_length_mm']:g} mm"
+    low, high = c["force_interval_n"]
     force = (
-        f"a median force of {c['force_median_n']:.1f} N at {100 * requirement.contraction:g} % contraction and "
+        f"an operating force of {c['force_median_n']:.1f} N (94 % interval {low:.1f} to {high:.1f} N, a new "
+        f"specimen contracting against the load) at {100 * requirement.contraction:g} % contraction and "
         f"{requirement.max_pressure_pa / 1e3:g} kPa against the {requirement.force_n:g} N asked"
     )
+    if c["infeasible"]:
+        return f"{design} is infeasible: {'; '.join(c['infeasible'])}; it would give {force}."
     binding = c["binding"]
     return (
         f"{design} meets every requirement with probability {c['probability']:.2f}, with {force}; "
@@ -312,9 +459,22 @@ def explain(candidate: dict, requirement: Requirement) -> str:
     )
 
 
-def recommend(spec_path: str | Path, results_dir: str | Path | None = None, *, log=print) -> dict:
+def recommend(
+    spec_path: str | Path,
+    results_dir: str | Path | None = None,
+    *,
+    mount_compliance_m_per_n: float = 0.0,
+    seed: int = 0,
+    log=print,
+) -> dict:
     """Load a spec and the material results it names, score every candidate; returns ``requirement``,
-    ``candidates`` (best first, see :func:`evaluate_candidates`) and ``explanation`` of the top one."""
+    ``candidates`` (best first, see :func:`evaluate_candidates`), ``explanation`` of the top one, ``removed``
+    (the rig artefacts left out of the design's predictions) and ``notes``. ``mount_compliance_m_per_n``
+    [m/N]: the design's mount (default 0: stiff). ``seed``: of the new-specimen factors."""
+    if not (math.isfinite(mount_compliance_m_per_n) and mount_compliance_m_per_n >= 0.0):
+        raise PeanoBayesInputError(
+            f"mount compliance: expected a finite number >= 0 [m/N], got {mount_compliance_m_per_n!r}"
+        )
     from .inference.results import load_result
     from .metrics import read_metrics
 
@@ -330,7 +490,9 @@ def recommend(spec_path: str | Path, results_dir: str | Path | None = None, *, l
             raise PeanoBayesInputError(f"{directory}: no posterior.nc for material {code!r}")
         metrics = read_metrics(directory) if (directory / "metrics.json").exists() else None
         materials[code] = (load_result(directory), metrics)
-    candidates = evaluate_candidates(spec, materials, log=log)
+    candidates, removed = evaluate_candidates(
+        spec, materials, mount_compliance_m_per_n=mount_compliance_m_per_n, seed=seed, log=log
+    )
     notes = []
     if spec.requirement.max_response_time_s is not None:
         prior_based = [c for c, (_, m) in materials.items() if m and m["summary"]["speed"]["from_prior"]]
@@ -347,23 +509,50 @@ def recommend(spec_path: str | Path, results_dir: str | Path | None = None, *, l
         "requirement": spec.requirement.__dict__,
         "candidates": candidates,
         "explanation": explain(candidates[0], spec.requirement),
+        "removed": removed,
         "notes": notes,
     }
 
 
 def recommendation_markdown(report: dict, top: int = 10) -> str:
-    """The ``top`` candidates as a markdown table, then the one-sentence explanation of the first."""
+    """The ``top`` candidates as a markdown table, then the one-sentence explanation of the first, what was
+    removed from the rig's conditions and the notes."""
     lines = [
-        "| rank | material | tubes | w [mm] | l [mm] | P(meets all) | median force [N] | binding |",
-        "|---|---|---|---|---|---|---|---|",
+        "| rank | material | tubes | w [mm] | l [mm] | P(meets all) | operating force [N] (94 %) | force margin "
+        "(94 %) | binding |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for i, c in enumerate(report["candidates"][:top], 1):
+        low, high = c["force_interval_n"]
+        m_low, m_high = c["force_margin_interval"]
+        binding = "infeasible" if c["infeasible"] else f"{c['binding']} ({c['p_each'][c['binding']]:.2f})"
         lines.append(
             f"| {i} | {c['material']} | {c['n_tubes']} | {c['tube_width_mm']:g} | {c['tube_length_mm']:g} | "
-            f"{c['probability']:.2f} | {c['force_median_n']:.1f} | {c['binding']} ({c['p_each'][c['binding']]:.2f}) |"
+            f"{c['probability']:.2f} | {c['force_median_n']:.1f} ({low:.1f} to {high:.1f}) | "
+            f"{100 * c['margin']['force']:+.0f} % ({100 * m_low:+.0f} to {100 * m_high:+.0f} %) | {binding} |"
         )
-    notes = [f"Note: {n}." for n in report.get("notes", [])]
-    return "\n".join(lines + ["", report["explanation"], *([""] + notes if notes else [])])
+    refused = {c["material"]: c["infeasible"] for c in report["candidates"] if c["infeasible"]}
+    extra = [f"Infeasible: {code}: {'; '.join(reasons)}." for code, reasons in refused.items()]
+    extra += [f"Design conditions: {r}." for r in report.get("removed", [])]
+    extra += [f"Note: {n}." for n in report.get("notes", [])]
+    return "\n".join(lines + ["", report["explanation"], *([""] + extra if extra else [])])
 
 
-__all__ = ["Requirement", "Spec", "evaluate_candidates", "explain", "load_spec", "recommend", "recommendation_markdown"]
+__all__ = [
+    "OPERATING_RATE_PER_S",
+    "OPERATING_STRETCH",
+    "Requirement",
+    "Spec",
+    "design_limits",
+    "evaluate_candidates",
+    "explain",
+    "limit_violations",
+    "load_spec",
+    "new_specimen_draws",
+    "operating_forces",
+    "operating_strain",
+    "recommend",
+    "recommendation_markdown",
+    "thickness_m",
+    "wall_thickness_m",
+]

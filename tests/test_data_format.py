@@ -379,11 +379,10 @@ def test_interrupted_save_leaves_old_files_and_no_temporaries(valid, tmp_path, m
 def test_check_command_summary_and_json(capsys):
     assert main(["check", str(VALID), "--json"]) == 0
     out, err = capsys.readouterr()
-    assert err == ""
-    lines = out.splitlines()
+    lines = err.splitlines()  # under --json the summary a person reads goes to stderr
     assert "FC (100 g/m2 fiberglass-silicone composite)" in lines[0]
     assert any("load_cycle" in line and "6 samples" in line for line in lines)
-    facts = json.loads(lines[-1])
+    facts = json.loads(out)  # and stdout holds the JSON object alone
     assert facts["material"] == {"code": "FC", "name": "100 g/m2 fiberglass-silicone composite"}
     assert facts["geometry"]["tube_width_m"] == 0.015 and facts["geometry"]["n_tubes"] == 4
     assert facts["conditions"]["test_pressure_pa"] == 200_000.0

@@ -203,6 +203,7 @@ def test_killed_fit_resumes_without_losing_a_chunk(tmp_path):
         "--warmup",
         "120",  # three rounds of 40: every saved state is at a multiple of --chunk
         "--no-progress",
+        "--no-figures",  # report_results below draws them once
         "--seed",
         "4",
     ]
@@ -224,12 +225,14 @@ def test_killed_fit_resumes_without_losing_a_chunk(tmp_path):
     assert not (out / "TP" / "summary.json").exists() and not (out / "TP" / "posterior.nc").exists()
     saved_now = load_state(state)[0].shape[0]  # what the killed process had finished
     done = subprocess.run(cmd + ["--resume", "--json"], capture_output=True, text=True, env=env, timeout=900)
-    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
-    report = json.loads(done.stdout.strip().splitlines()[-1])
-    assert report["steps"] == 240
     summary = json.loads((out / "TP" / "summary.json").read_text())
+    # exit 3: finished unconverged (at 240 steps it may not have converged), results written and marked so
+    expected = 0 if summary["convergence"]["converged"] else 3
+    assert done.returncode == expected, done.stdout[-2000:] + done.stderr[-2000:]
+    report = json.loads(done.stdout)  # --json: stdout holds the JSON object alone, the log goes to stderr
+    assert report["steps"] == 240 and report["converged"] == summary["convergence"]["converged"]
     assert summary["resumed_from_step"] == saved_now and saved_now % 40 == 0
-    assert f"resumed from {state} at step {saved_now}" in done.stdout
+    assert f"resumed from {state} at step {saved_now}" in done.stderr
     assert (out / "TP" / "posterior.nc").exists()
     # An unconverged run keeps its state, and a larger step limit continues the same chain; a converged one
     # leaves none.
@@ -237,8 +240,8 @@ def test_killed_fit_resumes_without_losing_a_chunk(tmp_path):
     if state.exists():
         more = cmd[: cmd.index("--max-steps") + 1] + ["280"] + cmd[cmd.index("--max-steps") + 2 :]
         extended = subprocess.run(more + ["--resume", "--json"], capture_output=True, text=True, env=env, timeout=900)
-        assert extended.returncode == 0, extended.stdout[-2000:] + extended.stderr[-2000:]
-        assert json.loads(extended.stdout.strip().splitlines()[-1])["steps"] == 280
+        assert extended.returncode in (0, 3), extended.stdout[-2000:] + extended.stderr[-2000:]
+        assert json.loads(extended.stdout)["steps"] == 280
         assert json.loads((out / "TP" / "summary.json").read_text())["resumed_from_step"] == 240
     # The result file: all six groups, provenance attrs, pointwise arrays aligned with the observed bins.
     import arviz as az

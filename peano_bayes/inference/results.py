@@ -179,6 +179,12 @@ def result_config(idata) -> ModelConfig:
     return ModelConfig(**json.loads(idata.posterior.attrs["model_config"]))
 
 
+def draw_indices(total: int, n_draws: int) -> np.ndarray:
+    """(n_draws,) indices, evenly spaced, of stored posterior draws (chains and draws stacked, ``total`` of
+    them): the draws every reader of a result takes, so that quantities of one draw pair up."""
+    return np.linspace(0, total - 1, n_draws).round().astype(int)
+
+
 def parameter_draws(idata, n_draws: int, seed: int = 0) -> tuple[list[dict], tuple[str, ...]]:
     """``n_draws`` parameter sets [SI] of the typical specimen (specimen offset 0) from a result, evenly spaced
     over the stored posterior, and the names drawn from the prior instead (see
@@ -196,7 +202,7 @@ def parameter_draws(idata, n_draws: int, seed: int = 0) -> tuple[list[dict], tup
     total = post.sizes["sample"]
     if not 1 <= n_draws <= total:
         raise PeanoBayesInputError(f"n_draws must be in [1, {total}] (the stored draws), got {n_draws}")
-    pick = np.linspace(0, total - 1, n_draws).round().astype(int)
+    pick = draw_indices(total, n_draws)
     fixed = {**config.nominal_parameters(), **json.loads(attrs.get("fixed_parameters", "{}"))}
     names = config.parameter_names()
     prior_only = tuple(n for n in names if n not in post and n in STEP_ONLY_PARAMETERS)
