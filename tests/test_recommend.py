@@ -230,7 +230,7 @@ def _independent_operating_force(idata, geometry, pressure_pa, contraction, n_dr
     return float(np.median(forces)), float(np.median(relaxed))
 
 
-@pytest.mark.parametrize("name", ["soft_gripper", "wrist_orthosis"])
+@pytest.mark.parametrize("name", ["assistive_glove", "soft_gripper", "wrist_orthosis"])
 def test_the_recommended_operating_force_of_each_example_spec_matches_an_independent_recomputation(
     results, tmp_path, name
 ):
