@@ -9,6 +9,7 @@ Tolerances: +-10 % explicit, +-20 % approximate, +-30 % ambiguous; "about equal"
 
 from __future__ import annotations
 
+import argparse
 import csv
 import json
 import math
@@ -221,6 +222,7 @@ def edge_lines(measured: dict, margin: float = 0.05) -> list[str]:
 
 def main() -> None:
     """Measure every dataset and write ``experiments/datasets/CALIBRATION.md``."""
+    argparse.ArgumentParser(description=__doc__).parse_args()  # --help, and no stray arguments
     measured = {code: measure(code) for code in FIT_ORDER}
     metric_table, metric_misses = metric_rows(measured)
     order_table, order_misses = ordering_rows(measured)

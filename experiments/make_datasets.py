@@ -8,6 +8,7 @@ Run ``python experiments/make_datasets.py``.
 
 from __future__ import annotations
 
+import argparse
 import time
 import tomllib
 from pathlib import Path
@@ -34,6 +35,7 @@ def read_truth(path: Path = DATA / "true_parameters.toml") -> dict[str, tuple[di
 
 def main() -> None:
     """Simulate and save every material; print timings and file sizes."""
+    argparse.ArgumentParser(description=__doc__).parse_args()  # --help, and no stray arguments
     for code, (params, config, quirks) in read_truth().items():
         tic = time.perf_counter()
         dataset = simulate_dataset(code, params, config=config, quirks=quirks, seed=SEEDS[code], repeats=3, specimens=2)
