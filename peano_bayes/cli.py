@@ -22,6 +22,7 @@ from pathlib import Path
 
 from . import __version__
 from .commands import COMMANDS
+from .defaults import compilation_cache_dir
 from .errors import PeanoBayesError, PeanoBayesInputError
 
 #: Exit status of each outcome (documented in the module docstring and ``--help``).
@@ -56,7 +57,7 @@ def build_parser() -> argparse.ArgumentParser:
 def _use_compilation_cache() -> None:
     """Point JAX's persistent compilation cache at ``$PEANO_BAYES_CACHE`` (or ``~/.cache/peano_bayes/jax``)
     without importing JAX: JAX reads these variables when it is first imported, if it ever is."""
-    directory = os.environ.get("PEANO_BAYES_CACHE") or str(Path.home() / ".cache" / "peano_bayes" / "jax")
+    directory = str(compilation_cache_dir())
     if "jax" in sys.modules:  # already imported (a caller's process): configure it directly
         from .jax_config import enable_compilation_cache
 

@@ -9,6 +9,7 @@ command exit with status 3.
 from __future__ import annotations
 
 import json
+import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -285,8 +286,6 @@ def _report(summary: dict) -> dict:
 
 @command("fit", "one dataset: multi-start least squares, then MCMC (emcee), into --out DIR/LABEL/ (resumable)")
 def fit_command(args):
-    import sys
-
     from .data import load
     from .pipeline import infer
 
@@ -337,8 +336,6 @@ fit_command.arguments = _fit_arguments
 
 @command("run", "the main job: every bundled material, fit + sample into results/ with results/index.md")
 def run(args):
-    import sys
-
     from .pipeline import run_bundled
 
     options = _check_sampling(args)
@@ -425,7 +422,6 @@ metrics_command.arguments = _metrics_arguments
 
 @command("rank", "design ranking with uncertainty across results (needs each result's metrics.json)")
 def rank_command(args):
-    from pathlib import Path
 
     from .atomic import write_text
     from .metrics import read_metrics
@@ -460,7 +456,6 @@ rank_command.arguments = _rank_arguments
 
 @command("recommend", "design recommendation: candidate materials and geometries scored against a requirement")
 def recommend_command(args):
-    from pathlib import Path
 
     from .atomic import write_text
     from .figures import recommendation_figure

@@ -5,6 +5,9 @@
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
 #: Every rig test a fit can use, in the data format's order.
 ALL_TESTS = ("load_cycle", "blocking", "stroke", "step")
 #: Tests fitted by default. The step response, sampled at 1 kHz and simulated through the inlet restriction,
@@ -20,3 +23,8 @@ DEFAULT_CHUNK = 500
 DEFAULT_WARMUP = 300
 #: Probability mass of the reported highest-density intervals (arviz's default).
 HDI_PROB = 0.94
+
+
+def compilation_cache_dir() -> Path:
+    """Where JAX's compiled programs are kept: ``$PEANO_BAYES_CACHE``, else ``~/.cache/peano_bayes/jax``."""
+    return Path(os.environ.get("PEANO_BAYES_CACHE") or Path.home() / ".cache" / "peano_bayes" / "jax")

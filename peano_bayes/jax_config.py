@@ -17,6 +17,8 @@ from pathlib import Path
 
 import jax
 
+from .defaults import compilation_cache_dir
+
 jax.config.update("jax_enable_x64", True)
 
 
@@ -24,7 +26,7 @@ def enable_compilation_cache(directory: str | os.PathLike | None = None) -> Path
     """Keep JAX's compiled programs in ``directory`` (default ``$PEANO_BAYES_CACHE`` or
     ``~/.cache/peano_bayes/jax``) and return it. Sets JAX's ``jax_compilation_cache_dir`` and caches every
     program that took at least 1 s to compile."""
-    directory = Path(directory or os.environ.get("PEANO_BAYES_CACHE") or Path.home() / ".cache" / "peano_bayes" / "jax")
+    directory = Path(directory) if directory is not None else compilation_cache_dir()
     directory.mkdir(parents=True, exist_ok=True)
     jax.config.update("jax_compilation_cache_dir", str(directory))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
