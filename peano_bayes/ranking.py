@@ -29,6 +29,13 @@ CRITERIA = {
 PARETO_CRITERIA = ("blocking_force_per_pressure", "stroke", "energy_per_pressure", "hysteresis_loss", "speed")
 #: "About equal" in the paper's orderings: |log ratio| within this band.
 EQUAL_BAND = 0.10
+#: Practical-equivalence margin: material a is *better than b by more than the margin* when its oriented value
+#: exceeds b's by more than this fraction of b's magnitude (5 %: about what separates two specimens of one
+#: material, so smaller differences do not decide a design).
+PRACTICAL_MARGIN = 0.05
+#: The paper's ordering agrees with the posterior when its probability is at least this (contradicts at most
+#: one minus it; undecided between).
+AGREEMENT = 0.9
 STIFFNESS = "stiffness_at_minus_1.5pct_0kPa"
 
 #: The paper's orderings (``published_orderings.csv``, by row) as checks (metric, a, relation, b), relation
@@ -62,7 +69,10 @@ PUBLISHED_ORDERINGS = [
 @dataclass(frozen=True)
 class CriterionRanking:
     """One criterion over ``materials`` (m,): ``p_best`` (m,); ``p_better`` (m, m), P(row better than column);
-    ``mean_rank`` (m,) with ``rank_low``/``rank_high`` (94 % interval; 1 = best); ``n`` joint draws used."""
+    ``mean_rank`` (m,) with ``rank_low``/``rank_high`` (94 % interval; 1 = best); ``n`` joint draws used;
+    with the practical margin ``margin``: ``p_better_by_margin`` (m, m), P(row better than column by more than
+    the margin), ``p_clearly_best`` (m,), P(better than every other by more than the margin), and
+    ``p_near_best`` (m,), P(no other better than it by more than the margin)."""
 
     criterion: str
     materials: tuple
@@ -72,6 +82,10 @@ class CriterionRanking:
     rank_low: np.ndarray
     rank_high: np.ndarray
     n: int
+    margin: float = PRACTICAL_MARGIN
+    p_better_by_margin: np.ndarray | None = None
+    p_clearly_best: np.ndarray | None = None
+    p_near_best: np.ndarray | None = None
 
 
 def _joint(draws: dict, materials, names) -> np.ndarray:
@@ -84,15 +98,18 @@ def _joint(draws: dict, materials, names) -> np.ndarray:
     return stack[np.all(np.isfinite(stack), axis=(1, 2))]
 
 
-def rank_criterion(draws: dict, criterion: str, materials=None) -> CriterionRanking:
+def rank_criterion(draws: dict, criterion: str, materials=None, margin: float = PRACTICAL_MARGIN) -> CriterionRanking:
     """Rank ``materials`` (default: all keys of ``draws``) by ``criterion``; ``draws`` maps code -> metric ->
     (n,) posterior predictive draws. Ties (equal draws) count as not better; materials tied for best in a
-    draw share it equally, and tied materials share the better rank (1 + the number strictly better)."""
+    draw share it equally, and tied materials share the better rank (1 + the number strictly better).
+    ``margin``: the practical-equivalence margin (:data:`PRACTICAL_MARGIN`)."""
     materials = tuple(materials or draws)
     values = _joint(draws, materials, (criterion,))[..., 0]  # (n, m)
     if values.shape[0] == 0:
         raise ValueError(f"no draw has a finite {criterion} for every material")
     better = values[:, :, None] > values[:, None, :]  # [d, i, j]: i better than j in draw d
+    clearly = values[:, :, None] - values[:, None, :] > margin * np.abs(values[:, None, :])
+    others = ~np.eye(len(materials), dtype=bool)[None]
     order = 1 + better.sum(axis=1)  # rank per draw, 1 = best
     best = order == 1
     return CriterionRanking(
@@ -104,6 +121,10 @@ def rank_criterion(draws: dict, criterion: str, materials=None) -> CriterionRank
         np.quantile(order, 0.03, axis=0, method="inverted_cdf"),
         np.quantile(order, 0.97, axis=0, method="inverted_cdf"),
         values.shape[0],
+        margin,
+        clearly.mean(axis=0),
+        np.all(clearly | ~others, axis=2).mean(axis=0),
+        np.mean(~np.any(clearly & others, axis=1), axis=0),
     )
 
 
@@ -137,7 +158,20 @@ def ordering_checks(draws: dict) -> list[dict]:
                 p = float(np.mean(va[ok] > vb[ok]))
             else:
                 p = float(np.mean(np.abs(np.log(va[ok] / vb[ok])) <= EQUAL_BAND))
-            out.append({"row": row, "metric": metric, "a": a, "relation": relation, "b": b, "probability": p})
+            verdict = "agrees" if p >= AGREEMENT else "contradicts" if p <= 1.0 - AGREEMENT else "undecided"
+            if math.isnan(p):
+                verdict = "undecided"
+            out.append(
+                {
+                    "row": row,
+                    "metric": metric,
+                    "a": a,
+                    "relation": relation,
+                    "b": b,
+                    "probability": p,
+                    "verdict": verdict,
+                }
+            )
     return out
 
 
@@ -162,6 +196,10 @@ def rank_materials(draws: dict, from_prior=()) -> dict:
             "mean_rank": by(r.mean_rank.tolist()),
             "rank_interval": by([[int(lo), int(hi)] for lo, hi in zip(r.rank_low, r.rank_high, strict=True)]),
             "p_better": by([by(row.tolist()) for row in r.p_better]),
+            "margin": r.margin,
+            "p_better_by_margin": by([by(row.tolist()) for row in r.p_better_by_margin]),
+            "p_clearly_best": by(r.p_clearly_best.tolist()),
+            "p_near_best": by(r.p_near_best.tolist()),
             "n": r.n,
             "from_prior": criterion in from_prior,
         }
@@ -176,7 +214,15 @@ def rank_materials(draws: dict, from_prior=()) -> dict:
 def ranking_markdown(report: dict) -> str:
     """Markdown of :func:`rank_materials`: per criterion P(best) and expected rank; the Pareto set; orderings."""
     materials = report["materials"]
-    lines = ["### P(best) and expected rank (94 % interval) per criterion", ""]
+    margin = next((r["margin"] for r in report["criteria"].values() if "margin" in r), PRACTICAL_MARGIN)
+    lines = [
+        "### Per criterion: P(best), P(clearly best), P(near best) and expected rank (94 % interval)",
+        "",
+        f"*Clearly best*: better than every other material by more than {100 * margin:g} % (the practical-"
+        f"equivalence margin); *near best*: no material better than it by more than {100 * margin:g} %. Where "
+        "several materials are near best with high probability, the data do not tell them apart for design.",
+        "",
+    ]
     lines.append("| criterion | " + " | ".join(materials) + " |")
     lines.append("|---|" + "---|" * len(materials))
     for criterion, r in report["criteria"].items():
@@ -185,7 +231,10 @@ def ranking_markdown(report: dict) -> str:
         cells = []
         for c in materials:
             low, high = r["rank_interval"][c]
-            cells.append(f"{r['p_best'][c]:.2f}, rank {r['mean_rank'][c]:.1f} ({low}-{high})")
+            extra = ""
+            if "p_clearly_best" in r:
+                extra = f" / {r['p_clearly_best'][c]:.2f} / {r['p_near_best'][c]:.2f}"
+            cells.append(f"{r['p_best'][c]:.2f}{extra}, rank {r['mean_rank'][c]:.1f} ({low}-{high})")
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
     if report["pareto"]:
         lines += ["", f"### P(Pareto-optimal) over {', '.join(PARETO_CRITERIA)}", ""]
@@ -195,16 +244,29 @@ def ranking_markdown(report: dict) -> str:
         likely = [c for c in materials if report["pareto"][c] >= 0.9]
         lines += ["", f"Pareto-optimal with probability >= 0.9: {', '.join(likely) or 'none'}."]
     if report["orderings"]:
-        lines += ["", "### The paper's orderings on the posterior", "", "| metric | relation | probability |"]
-        lines.append("|---|---|---|")
+        lines += [
+            "",
+            "### The paper's orderings on the posterior",
+            "",
+            f"Agrees: probability >= {AGREEMENT:g}; contradicts: <= {1 - AGREEMENT:.1f}; undecided between.",
+            "",
+            "| metric | paper's ordering | inferred probability | agree? |",
+        ]
+        lines.append("|---|---|---|---|")
         for o in report["orderings"]:
             shown = "about equal to" if o["relation"] == "=" else ">"
             flag = " (prior only: not fitted)" if o.get("from_prior") else ""
-            lines.append(f"| {o['metric']}{flag} | {o['a']} {shown} {o['b']} | {o['probability']:.2f} |")
+            verdict = o.get("verdict", "")
+            verdict = f"**{verdict}**" if verdict == "contradicts" else verdict
+            lines.append(
+                f"| {o['metric']}{flag} | {o['a']} {shown} {o['b']} | {o['probability']:.2f} | {verdict} |"
+            )
     return "\n".join(lines)
 
 
 __all__ = [
+    "AGREEMENT",
+    "PRACTICAL_MARGIN",
     "CRITERIA",
     "EQUAL_BAND",
     "PARETO_CRITERIA",

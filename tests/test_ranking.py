@@ -25,6 +25,23 @@ def test_probabilities_match_the_normal_theory(rng):
     assert r.mean_rank[1] == pytest.approx(1.24, abs=0.02)
 
 
+def test_margin_probabilities_match_the_normal_theory(rng):
+    """A ~ N(1, 0.02), B ~ N(1.02, 0.02): B is best most of the time, yet almost never better by more than the
+    5 % margin, so neither is *clearly* best and both are *near* best. Closed forms: P(B - A > 0.05 |A|) with
+    B - 1.05 A ~ N(-0.03, 0.02 sqrt(1 + 1.05^2)) = Phi(-1.036) = 0.150."""
+    draws = _draws(rng, {"A": 1.0, "B": 1.02}, sd=0.02, n=20_000)
+    r = rank_criterion(draws, "speed")
+    assert r.p_best[1] == pytest.approx(0.760, abs=0.02)
+    assert r.p_better_by_margin[1, 0] == pytest.approx(0.150, abs=0.01)
+    assert r.p_clearly_best[1] == pytest.approx(0.150, abs=0.01)
+    assert r.p_near_best[0] == pytest.approx(1 - 0.150, abs=0.01) and r.p_near_best[1] > 0.99
+    wide = _draws(rng, {"A": 1.0, "B": 1.5}, sd=0.02)
+    r = rank_criterion(wide, "speed")
+    assert r.p_clearly_best[1] == 1.0 and r.p_near_best[0] == 0.0
+    # lower is better: hysteresis 1.0 beats 1.5 by far more than 5 %
+    assert rank_criterion(wide, "hysteresis_loss").p_clearly_best[0] == 1.0
+
+
 def test_identical_materials_share_first_place(rng):
     draws = _draws(rng, {"A": 1.0, "C": 0.5}, n=200)
     draws["B"] = {c: v.copy() for c, v in draws["A"].items()}
@@ -57,6 +74,7 @@ def test_orderings_use_only_the_materials_present(rng):
     assert (speed["a"], speed["b"], speed["probability"]) == ("TP", "P", 1.0)
     equal = next(c for c in checks if c["relation"] == "=")  # hysteresis: TP about equal to P
     assert equal["probability"] == 0.0  # a factor of 2 apart
+    assert speed["verdict"] == "agrees" and equal["verdict"] == "contradicts"
 
 
 def test_draws_not_finite_everywhere_are_left_out(rng):
