@@ -18,6 +18,7 @@ from . import bundled
 from .defaults import (
     ALL_TESTS,
     DEFAULT_CHUNK,
+    DEFAULT_ENSEMBLES,
     DEFAULT_MAX_STEPS,
     DEFAULT_STARTS,
     DEFAULT_TESTS,
@@ -221,7 +222,16 @@ def _sampling_arguments(p):
     p.add_argument(
         "--starts", type=int, default=DEFAULT_STARTS, help=f"least-squares starts (default: {DEFAULT_STARTS})"
     )
-    p.add_argument("--walkers", type=int, default=None, help="emcee walkers (default: max(32, 2 x parameters + 2))")
+    p.add_argument(
+        "--walkers", type=int, default=None, help="emcee walkers per ensemble (default: max(32, 2 x parameters + 2))"
+    )
+    p.add_argument(
+        "--ensembles",
+        type=int,
+        default=DEFAULT_ENSEMBLES,
+        help=f"independently started ensembles that R-hat compares (default: {DEFAULT_ENSEMBLES}; fewer than 4 "
+        "never certify convergence)",
+    )
     p.add_argument(
         "--chunk",
         type=int,
@@ -257,11 +267,14 @@ def _check_sampling(args):
         raise PeanoBayesInputError(f"--warmup must be >= 0, got {args.warmup}")
     if args.walkers is not None and args.walkers < 4:
         raise PeanoBayesInputError(f"--walkers must be >= 4, got {args.walkers}")
+    if args.ensembles < 1:
+        raise PeanoBayesInputError(f"--ensembles must be >= 1, got {args.ensembles}")
     return dict(
         seed=args.seed,
         tests=tuple(args.tests),
         n_starts=args.starts,
         n_walkers=args.walkers,
+        n_ensembles=args.ensembles,
         chunk=args.chunk,
         max_steps=args.max_steps,
         warmup=args.warmup,

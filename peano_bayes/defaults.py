@@ -17,6 +17,9 @@ DEFAULT_TESTS = ("load_cycle", "blocking", "stroke")
 DEFAULT_MAX_STEPS = 40_000
 #: Least-squares starts (one vmapped Levenberg-Marquardt solve from each).
 DEFAULT_STARTS = 16
+#: Independently started emcee ensembles per fit; R-hat compares them (at least 4, see
+#: :data:`peano_bayes.inference.sample.MIN_ENSEMBLES`).
+DEFAULT_ENSEMBLES = 4
 #: Sampler steps between saved states and convergence checks.
 DEFAULT_CHUNK = 500
 #: Warm-up steps (discarded) that fit the sampler's proposal.

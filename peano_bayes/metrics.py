@@ -20,7 +20,7 @@ and repeats. Interpretation choices, stated once:
 
 **Predicted** (:func:`model_metrics`, :func:`posterior_metrics`): the same definitions on noise-free virtual-rig
 signals of one specimen (:func:`peano_bayes.rig.simulate_dataset`, the paper's protocol for the material), one
-simulation per parameter draw; the stiffness from a dedicated 0 kPa stretch from 0 to -3 % strain
+simulation per parameter draw (by default a new specimen's, see :func:`posterior_metrics`); the stiffness from a dedicated 0 kPa stretch from 0 to -3 % strain
 (:func:`zero_kpa_stiffness`), because the rig's 0 kPa cycle starts at the start tension, which stretches soft
 muscles past -1.5 %.
 """
@@ -243,15 +243,17 @@ def protocol_material(idata) -> str | MaterialSpec:
 
 
 def posterior_metrics(
-    idata, *, n_draws: int = 100, seed: int = 0, progress: Callable | None = None
+    idata, *, n_draws: int = 100, seed: int = 0, progress: Callable | None = None, level: str = "new_specimen"
 ) -> PosteriorMetrics:
     """Posterior predictive Table 3 metrics of a result (``posterior.nc`` as arviz InferenceData): the paper's
     protocol simulated noise-free for ``n_draws`` posterior draws
     (:func:`~peano_bayes.inference.results.parameter_draws`), each measured as
-    the rig would be (:func:`model_metrics`). ``progress`` wraps the draw iterator (e.g. ``tqdm``)."""
+    the rig would be (:func:`model_metrics`). ``level``: ``"new_specimen"`` (default: a muscle not yet made,
+    so the intervals include the between-specimen spread) or ``"population"``. ``progress`` wraps the draw
+    iterator (e.g. ``tqdm``)."""
     protocol = protocol_material(idata)
     config = result_config(idata)
-    sets, prior_only = parameter_draws(idata, n_draws, seed)
+    sets, prior_only = parameter_draws(idata, n_draws, seed, level=level)
     draws = {name: np.full(n_draws, np.nan) for name in METRIC_UNITS}
     failed = 0
     for i, params in enumerate(progress(sets) if progress else sets):

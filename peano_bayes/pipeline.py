@@ -22,6 +22,7 @@ from .data import Dataset, load
 from .defaults import (
     ALL_TESTS,
     DEFAULT_CHUNK,
+    DEFAULT_ENSEMBLES,
     DEFAULT_MAX_STEPS,
     DEFAULT_STARTS,
     DEFAULT_TESTS,
@@ -36,13 +37,17 @@ from .inference.likelihood import prepare
 from .inference.posterior import CONTRAST_PREFIX, DEFAULT_HELD, SPECIMEN_SD, build_posterior
 from .inference.priors import load_prior, prior_for
 from .inference.results import (
+    NEW_SPECIMEN_PREFIX,
     parameter_table,
+    posterior_contraction,
     to_inference_data,
     write_netcdf,
 )
 from .inference.sample import sample, walker_count
 
 BUNDLED_MATERIALS = bundled.MATERIALS
+#: Posterior contraction below which ``index.md`` says a parameter's posterior is close to its prior.
+WEAKLY_INFORMED = 0.5
 
 
 def _select_tests(dataset: Dataset, tests) -> Dataset:
@@ -148,6 +153,7 @@ def infer(
     tests=DEFAULT_TESTS,
     n_starts: int = DEFAULT_STARTS,
     n_walkers: int | None = None,
+    n_ensembles: int = DEFAULT_ENSEMBLES,
     chunk: int = DEFAULT_CHUNK,
     max_steps: int = DEFAULT_MAX_STEPS,
     warmup: int = DEFAULT_WARMUP,
@@ -227,6 +233,7 @@ def infer(
         centre,
         covariance,
         n_walkers=n_walkers,
+        n_ensembles=n_ensembles,
         seed=seed,
         chunk=chunk,
         max_steps=max_steps,
@@ -262,12 +269,30 @@ def infer(
         "tests": list(dataset.tests),
         "seed": seed,
         "n_walkers": n_walkers,
+        "n_ensembles": result.n_ensembles,
         "steps": int(result.chain.shape[0]),
         "resumed_from_step": result.resumed_from,
         "acceptance": result.acceptance,
         "convergence": conv.as_dict(posterior.names),
         "min_ess_per_s": float(np.min(conv.ess_bulk) / max(result.seconds, 1e-9)),
         "parameters": parameter_table(idata, posterior.names, HDI_PROB),
+        "hierarchy": {
+            "specimens": list(observations.specimens),
+            "varying": list(posterior.varying),
+            "spread": SPECIMEN_SD if posterior.varying else None,
+            "levels": "parameters: population values; new_specimen: a specimen not yet made",
+        },
+        "new_specimen": {
+            name: row
+            for name, row in zip(
+                posterior.varying,
+                parameter_table(idata, [NEW_SPECIMEN_PREFIX + n for n in posterior.varying], HDI_PROB).values(),
+                strict=True,
+            )
+        }
+        if posterior.varying
+        else {},
+        "contraction": posterior_contraction(idata, posterior.prior.names),
         "units": posterior.units,
         "fixed": posterior.fixed,
         "fit_quality_least_squares": fitted["quality"],
@@ -316,21 +341,44 @@ def index_markdown(
         lines += [
             f"## {s['material']}",
             "",
-            f"Data: `{s['dataset']}` ({', '.join(s['tests'])}); {s['n_walkers']} walkers x {s['steps']} steps; "
+            f"Data: `{s['dataset']}` ({', '.join(s['tests'])}); {s.get('n_ensembles', 1)} ensembles of "
+            f"{s['n_walkers']} walkers x {s['steps']} steps; "
             f"{verdict}. Max R-hat {max(conv['rhat'].values()):.3f}, "
             f"min bulk ESS {min(conv['ess_bulk'].values()):.0f}, "
             f"chain {conv['tau_lengths']:.0f} autocorrelation times long.",
             "",
-            "| parameter | unit | mean | 94 % interval | R-hat | bulk ESS |",
-            "|---|---|---|---|---|---|",
+            "Population values (the material), a new specimen's value (what one more muscle made of it would "
+            "have: the population plus the between-specimen spread), and the posterior contraction "
+            "(1 - posterior variance / prior variance, in the sampler's unconstrained space: near 0 means the data "
+            "said little and the interval is the prior's).",
+            "",
+            "| parameter | unit | population mean | population 94 % | new specimen 94 % | contraction | R-hat | "
+            "bulk ESS |",
+            "|---|---|---|---|---|---|---|---|",
         ]
+
+        def interval(row):
+            low, high = (format_number(row[k], nonfinite=None) for k in ("hdi_low", "hdi_high"))
+            return f"{low} to {high}"
+
+        weak = []
         for name, row in s["parameters"].items():
+            new = s.get("new_specimen", {}).get(name)
+            contraction = s.get("contraction", {}).get(name)
+            if contraction is not None and contraction < WEAKLY_INFORMED:
+                weak.append(name)
             lines.append(
                 f"| {name} | {s['units'].get(name, '')} | {format_number(row['mean'], nonfinite=None)} | "
-                f"{format_number(row['hdi_low'], nonfinite=None)} to "
-                f"{format_number(row['hdi_high'], nonfinite=None)} | "
+                f"{interval(row)} | {interval(new) if new else ''} | "
+                f"{'' if contraction is None else f'{contraction:.2f}'} | "
                 f"{conv['rhat'][name]:.3f} | {conv['ess_bulk'][name]:.0f} |"
             )
+        if weak:
+            lines += [
+                "",
+                f"**Posterior close to its prior** (contraction below {WEAKLY_INFORMED:g}): {', '.join(weak)}. "
+                "The fitted tests say little about these; their intervals are mostly the prior's.",
+            ]
         lines += ["", "| test | RMSE | max error | R² |", "|---|---|---|---|"]
         for test, q in s["fit_quality_posterior_mean"].items():
             lines.append(
@@ -470,11 +518,29 @@ def _can_continue(summary: dict, directory: Path, max_steps: int) -> bool:
     return unconverged and summary.get("steps", 0) < max_steps and (directory / "sampler_state.npz").exists()
 
 
+class RunLog:
+    """A log function that prints each message (through ``echo``, default :func:`print`) and appends it, with
+    the UTC time, to ``path`` (``results/run.log``). Picklable, so worker processes append to the same file
+    (one short write per line, opened in append mode)."""
+
+    def __init__(self, path: str | Path, echo=print):
+        self.path = str(path)
+        self.echo = echo
+
+    def __call__(self, message: str) -> None:
+        if self.echo is not None:
+            self.echo(message)
+        stamp = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+        with open(self.path, "a", encoding="utf-8") as f:
+            f.write(f"{stamp} {message}\n")
+
+
 def run_bundled(
     out_dir: str | Path = "results", *, materials=BUNDLED_MATERIALS, jobs: int = 1, log=print, **kwargs
 ) -> list[dict]:
     """The main job: :func:`infer` on every bundled dataset, then metrics, figures, ranking and
-    ``out_dir/index.md`` (:func:`report_results`).
+    ``out_dir/index.md`` (:func:`report_results`). Every log line also goes, timestamped, to
+    ``out_dir/run.log`` (:class:`RunLog`), from worker processes too.
 
     A material whose ``summary.json`` exists is not redone (delete it to redo), unless its chain is unconverged,
     its sampler state was kept and ``max_steps`` now allows more steps: then, like a run that was interrupted,
@@ -482,6 +548,8 @@ def run_bundled(
     per-chunk log lines instead of progress bars. ``kwargs`` go to :func:`infer`.
     """
     out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    log = RunLog(out_dir / "run.log", log)
     max_steps = kwargs.get("max_steps", DEFAULT_MAX_STEPS)
     summaries: dict[str, dict] = {}
     todo = []
@@ -507,7 +575,7 @@ def run_bundled(
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor, as_completed
 
-        kwargs = {**kwargs, "progress": False}
+        kwargs = {**kwargs, "progress": False, "log": RunLog(out_dir / "run.log")}
         with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
             futures = {pool.submit(_infer_bundled, code, str(out_dir), kwargs): code for code in todo}
             for future in as_completed(futures):
@@ -518,6 +586,7 @@ def run_bundled(
 
 
 __all__ = [
+    "RunLog",
     "ALL_TESTS",
     "BUNDLED_MATERIALS",
     "DEFAULT_MAX_STEPS",

@@ -312,15 +312,18 @@ def operating_forces(stacked: dict, config, geometry: Geometry, pressure_pa: flo
 
 
 def new_specimen_draws(idata, param_sets: list[dict], *, seed: int = 0) -> dict:
-    """Stacked parameter draws (name -> (n,)) of a new specimen of the material: each of ``param_sets`` (the
-    typical specimen, :func:`~peano_bayes.inference.results.parameter_draws`) with its wall stiffnesses
-    (:data:`~peano_bayes.inference.likelihood.SPECIMEN_SCALED`) times ``exp(specimen_log_sd z)``, ``z ~ N(0, 1)``,
-    the spread taken at the same posterior draw. A fit of one specimen has no spread: the draws are unchanged."""
-    from .inference.results import draw_indices
+    """Stacked parameter draws (name -> (n,)) of a new specimen of the material from ``param_sets`` of
+    :func:`~peano_bayes.inference.results.parameter_draws`. A result of the specimen hierarchy already gives
+    new-specimen draws (its ``new_specimen__<name>`` variables): they are stacked unchanged. For a result
+    that holds only the spread ``specimen_log_sd`` (a common stiffness factor per specimen), each set's wall
+    stiffnesses (:data:`~peano_bayes.inference.likelihood.SPECIMEN_SCALED`) are multiplied by
+    ``exp(specimen_log_sd z)``, ``z ~ N(0, 1)``, the spread taken at the same posterior draw. A fit of one
+    specimen has no spread: the draws are unchanged."""
+    from .inference.results import NEW_SPECIMEN_PREFIX, draw_indices
 
     stacked = {k: np.asarray([p[k] for p in param_sets], float) for k in param_sets[0]}
     post = idata.posterior
-    if SPECIMEN_SD not in post:
+    if SPECIMEN_SD not in post or any(str(k).startswith(NEW_SPECIMEN_PREFIX) for k in post.data_vars):
         return stacked
     sd = post[SPECIMEN_SD].stack(sample=("chain", "draw")).values
     sd = sd[draw_indices(sd.size, len(param_sets))]

@@ -46,7 +46,7 @@ def recovered():
         posterior,
         centre,
         covariance,
-        n_walkers=16,
+        n_walkers=8,  # per ensemble: four ensembles of eight, 2 x the dimension each
         seed=2,
         chunk=500,
         max_steps=6000,

@@ -12,15 +12,18 @@ from hypothesis import strategies as st
 
 from peano_bayes.inference.likelihood import (
     DEFAULT_BIN_SIZES,
+    DEFAULT_BINS_PER_SEGMENT,
     bin_means,
     log_likelihood,
     pointwise_log_likelihood,
     predict,
     prepare,
     sample_times,
+    segment_bins,
+    segment_starts,
 )
 from peano_bayes.physics import DEFAULT_CONFIG
-from peano_bayes.rig import RigNoise, simulate_dataset
+from peano_bayes.rig import RigNoise, RigProtocol, simulate_dataset
 
 NOISE = {
     "noise_load_cycle_force_n": 0.2,
@@ -60,7 +63,7 @@ def test_bin_mean_noise_shrinks_by_sqrt_k(rng):
 
 
 def test_prepare_stacks_runs_and_keeps_every_sample(dataset):
-    obs = prepare(dataset)
+    obs = prepare(dataset, DEFAULT_BIN_SIZES)
     tests = sorted(g.test for g in obs.groups)
     assert tests == ["blocking", "load_cycle", "step", "stroke"]
     for group in obs.groups:
@@ -110,6 +113,55 @@ def test_binning_barely_moves_the_likelihood_surface(dataset, truth):
 
     peak_raw, curv_raw = profile(1)
     peak_bin, curv_bin = profile(4)
+    assert abs(peak_bin - peak_raw) < 0.02
+    assert curv_bin == pytest.approx(curv_raw, rel=0.15)
+
+
+def test_segments_are_the_ramps_of_the_inputs_and_bins_never_straddle_a_reversal():
+    strain = np.concatenate([np.linspace(0.0, -1.0, 41), np.linspace(-1.0, 0.0, 41)[1:]])  # down, then up
+    pressure = np.full(81, 3.0)
+    starts = segment_starts([strain, pressure])
+    assert starts.tolist() == [0, 40]  # the reversal sample opens the second ramp
+    assert segment_starts([pressure]).tolist() == [0]  # a hold is one segment
+    bins = segment_bins(starts, 81, 8)
+    assert bins.tolist() == [0, 5, 10, 15, 20, 25, 30, 35, 40, 45, 50, 55, 60, 65, 70, 75]
+    assert segment_bins(np.array([0, 40, 41]), 81, 4).tolist() == [0, 10, 20, 30, 40, 50, 60, 70]  # kink on 2 samples
+    assert segment_bins(np.array([0]), 5, 8).tolist() == [0, 1, 2, 3, 4]  # never more bins than samples
+
+
+@pytest.fixture(scope="module")
+def fast_rig():
+    """The TP load cycles of ``dataset``'s specimen sampled at 100 Hz instead of 20 Hz."""
+    return simulate_dataset(
+        "TP", None, seed=3, specimens=1, repeats=1, noise=RigNoise(), tests=("load_cycle",),
+        protocol=RigProtocol(quasi_static_rate_hz=100.0),
+    )
+
+
+def test_cost_is_set_by_segments_not_by_the_sampling_rate(dataset, fast_rig):
+    """Binned by segment, a load cycle sampled at 100 Hz is simulated at as many points as one at 20 Hz, each
+    bin holding five times the samples."""
+    slow = next(g for g in prepare(only(dataset, "load_cycle")).groups)
+    fast = next(g for g in prepare(fast_rig).groups)
+    per = DEFAULT_BINS_PER_SEGMENT["load_cycle"]
+    assert slow.observed.shape[1] == fast.observed.shape[1] == 2 * per  # two ramps, stretch and relax
+    assert slow.time_s.shape[1] == fast.time_s.shape[1]
+    assert np.median(fast.counts) == pytest.approx(5 * np.median(slow.counts), rel=0.1)
+
+
+def test_segment_binning_barely_moves_the_likelihood_surface_at_100_hz(fast_rig, truth):
+    """Profile of the tensile stiffness on 100 Hz load cycles, every sample (k = 1) against the default
+    segment bins (about 20 samples each): the same tolerances as fixed bins of four at 20 Hz above."""
+    grid = truth["tensile_ka_n_per_m"] * jnp.exp(jnp.linspace(-0.1, 0.1, 9))
+
+    def profile(obs):
+        ll = jax.jit(jax.vmap(lambda ka: log_likelihood({**truth, **NOISE, "tensile_ka_n_per_m": ka}, obs)))
+        values = np.asarray(ll(grid))
+        c2, c1, _ = np.polyfit(np.log(np.asarray(grid)), values, 2)
+        return -c1 / (2.0 * c2), -2.0 * c2
+
+    peak_raw, curv_raw = profile(prepare(fast_rig, {"load_cycle": 1}))
+    peak_bin, curv_bin = profile(prepare(fast_rig))
     assert abs(peak_bin - peak_raw) < 0.02
     assert curv_bin == pytest.approx(curv_raw, rel=0.15)
 

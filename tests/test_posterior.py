@@ -30,9 +30,12 @@ def test_sampled_parameters_follow_the_tests_and_specimens(stroke_data):
     post = build_posterior(prepare(stroke_data), prior_for("TP"))
     assert not STEP_ONLY_PARAMETERS & set(post.names)
     assert "orifice_area_m2" in post.fixed
-    assert {"noise_stroke_strain", "specimen_log_sd", "specimen_contrast_1"} <= set(post.names)
+    assert {"noise_stroke_strain", "specimen_log_sd", "specimen_contrast_tensile_ka_n_per_m_1"} <= set(post.names)
     assert "noise_load_cycle_force_n" not in post.names
-    assert post.ndim == post.prior.ndim + 1
+    # one contrast (two specimens) per sampled parameter that differs between specimens
+    varying = {"tensile_ka_n_per_m", "tensile_kb_n_per_m2", "bending_k1_n", "bending_k2_n", "extension_k_n_per_m"}
+    assert set(post.varying) == varying & set(post.prior.names)
+    assert post.ndim == post.prior.ndim + len(post.varying)
     one = simulate_dataset("TP", None, seed=1, specimens=1, repeats=1, tests=("stroke",))
     single = build_posterior(prepare(one), prior_for("TP"))
     assert "specimen_log_sd" not in single.names and single.n_contrasts == 0
@@ -53,31 +56,67 @@ def test_log_posterior_is_finite_or_minus_inf_never_nan(stroke_data):
     assert np.sum(np.isfinite(values)) >= 12
 
 
-def test_specimen_offsets_scale_the_wall_stiffness(stroke_data):
+def test_each_varying_parameter_has_its_own_specimen_offset(stroke_data):
+    """A contrast moves one parameter of the two specimens apart (geometric mean kept) and no other: the
+    prediction equals one made with each specimen's own values passed directly."""
     obs = prepare(stroke_data)
     post = build_posterior(obs, prior_for("TP"))
     theta = np.zeros(post.ndim)
     theta[: post.prior.ndim] = np.asarray(post.prior.median_unconstrained())
-    theta[-1] = 0.2
+    theta[post.names.index("specimen_contrast_tensile_ka_n_per_m_1")] = 0.2
+    theta[post.names.index("specimen_contrast_bending_k2_n_1")] = -0.1
     params = post.params(theta)
-    offsets = np.asarray(params["specimen_log_offset"])
-    np.testing.assert_allclose(offsets, [-0.2 / np.sqrt(2), 0.2 / np.sqrt(2)], rtol=1e-12)
+    offsets = {k: np.asarray(v) for k, v in params["specimen_log_offset"].items()}
+    np.testing.assert_allclose(offsets["tensile_ka_n_per_m"], [-0.2 / np.sqrt(2), 0.2 / np.sqrt(2)], rtol=1e-12)
+    np.testing.assert_allclose(offsets["bending_k2_n"], [0.1 / np.sqrt(2), -0.1 / np.sqrt(2)], rtol=1e-12)
+    assert all(np.all(v == 0.0) for k, v in offsets.items() if k not in ("tensile_ka_n_per_m", "bending_k2_n"))
     group = obs.groups[0]
     shifted, _ = predict(params, group, config=post.config, geometry=obs.geometry)
     base = {k: v for k, v in params.items() if k != "specimen_log_offset"}
     b = np.asarray(group.run_specimen_index)
-    for s, factor in enumerate(np.exp(offsets)):
-        scaled = {
-            k: (
-                v * factor
-                if k
-                in ("tensile_ka_n_per_m", "tensile_kb_n_per_m2", "bending_k1_n", "bending_k2_n", "extension_k_n_per_m")
-                else v
-            )
-            for k, v in base.items()
-        }
-        direct, _ = predict(scaled, group, config=post.config, geometry=obs.geometry)
+    for s in range(2):
+        own = {k: v * np.exp(offsets[k][s]) if k in offsets else v for k, v in base.items()}
+        direct, _ = predict(own, group, config=post.config, geometry=obs.geometry)
         np.testing.assert_allclose(np.asarray(shifted)[b == s], np.asarray(direct)[b == s], rtol=1e-12)
+
+
+def test_levels_population_and_new_specimen_have_the_hierarchys_spread(stroke_data):
+    """From one theta repeated, the population value scatters around the specimens' geometric mean with sd
+    tau / sqrt(n) in log, a new specimen with sd tau sqrt(1 + 1/n); each specimen's value is the mean times its
+    offset. Checked against the closed forms on 200 000 draws."""
+    post = build_posterior(prepare(stroke_data), prior_for("TP"))
+    theta = np.zeros(post.ndim)
+    u = dict(post.prior.median())
+    u["specimen_log_sd"] = 0.1
+    theta[: post.prior.ndim] = np.asarray(post.prior.to_unconstrained(u))
+    theta[post.names.index("specimen_contrast_tensile_ka_n_per_m_1")] = 0.3
+    levels = post.levels(np.tile(theta, (200_000, 1)), np.random.default_rng(0))
+    m = u["tensile_ka_n_per_m"]
+    pop = np.log(levels["tensile_ka_n_per_m"] / m)
+    new = np.log(levels["new_specimen__tensile_ka_n_per_m"] / m)
+    assert abs(pop.mean()) < 0.001 and abs(new.mean()) < 0.001
+    np.testing.assert_allclose(pop.std(), 0.1 / np.sqrt(2), rtol=0.01)
+    np.testing.assert_allclose(new.std(), 0.1 * np.sqrt(1.5), rtol=0.01)
+    np.testing.assert_allclose(
+        levels["specimen__tensile_ka_n_per_m"][0], m * np.exp([-0.3 / np.sqrt(2), 0.3 / np.sqrt(2)]), rtol=1e-10
+    )
+    np.testing.assert_allclose(levels["noise_stroke_strain"], u["noise_stroke_strain"], rtol=1e-10)
+
+
+def test_bundled_priors_of_varying_parameters_are_flat_on_the_spread_scale():
+    """The population draw of :meth:`Posterior.levels` is exact when the population prior is flat in log over
+    a few tau / sqrt(n): every bundled prior of a varying parameter is loguniform or lognormal with
+    sigma_log >= 1 (tau near 0.05-0.2)."""
+    from peano_bayes.bundled import MATERIALS
+    from peano_bayes.inference.likelihood import SPECIMEN_VARYING
+
+    for code in MATERIALS:
+        prior = prior_for(code)
+        for name in SPECIMEN_VARYING & set(prior.names):
+            marginal = prior.marginals[name]
+            assert marginal.distribution in ("loguniform", "lognormal"), (code, name)
+            if marginal.distribution == "lognormal":
+                assert marginal.scale >= 1.0, (code, name)
 
 
 def test_denoised_inputs_bring_stroke_residuals_down_to_the_sensor_noise():
@@ -90,8 +129,8 @@ def test_denoised_inputs_bring_stroke_residuals_down_to_the_sensor_noise():
     def z(obs):
         group = obs.groups[0]
         pred, _ = jax.jit(lambda p: predict(p, group))(truth)
-        k = obs.bin_sizes["stroke"]
-        return float(np.sqrt(np.nanmean((group.observed - np.asarray(pred)) ** 2)) / (sigma / np.sqrt(k)))
+        z = (group.observed - np.asarray(pred)) / (sigma / np.sqrt(group.counts))
+        return float(np.sqrt(np.nanmean(z**2)))
 
     raw, denoised = z(prepare(data, denoise_inputs=False)), z(prepare(data))
     assert raw > 3.0

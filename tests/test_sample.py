@@ -18,6 +18,7 @@ from peano_bayes.inference.sample import (
     IndependenceProposal,
     convergence,
     load_state,
+    pooled,
     proposal_at,
     sample,
     warmup_rounds,
@@ -105,7 +106,7 @@ def test_a_step_limit_inside_the_warmup_says_so():
     g = Gaussian()
     result = sample(g, g.mean, 0.01 * np.eye(3), n_walkers=8, seed=0, warmup=300, max_steps=100, progress=False,
                     log=lambda m: None)
-    assert result.chain.shape == (100, 8, 3)
+    assert result.chain.shape == (100, 4 * 8, 3)  # four ensembles of eight walkers
     assert not result.convergence.converged
     assert "inside the warm-up" in result.convergence.problems[0]
 
@@ -124,7 +125,7 @@ def test_step_limit_gives_an_unconverged_result_that_says_why():
         progress=False,
         log=lambda m: None,
     )
-    assert result.chain.shape == (100, 8, 3)
+    assert result.chain.shape == (100, 4 * 8, 3)
     assert not result.convergence.converged
     assert any("autocorrelation times" in p for p in result.convergence.problems)
 
@@ -155,11 +156,35 @@ def test_resume_refuses_a_state_of_another_run(tmp_path):
         sample(g, g.mean, 0.05 * np.eye(3), seed=2, max_steps=40, resume=True, **kw)
 
 
+def test_pooled_lays_each_ensembles_walkers_end_to_end():
+    chain = np.arange(3 * 4).reshape(3, 4)  # (steps, walkers): two ensembles of two walkers
+    np.testing.assert_array_equal(pooled(chain, 2), [[0, 4, 8, 1, 5, 9], [2, 6, 10, 3, 7, 11]])
+
+
+def test_rhat_compares_ensembles_and_catches_one_in_another_mode():
+    """Four ensembles of well-mixed walkers converge; shift one ensemble (stuck in its own mode) and R-hat,
+    computed between the ensembles' pooled walkers, refuses the run."""
+    rng = np.random.default_rng(5)
+    chain = rng.normal(size=(3000, 4 * 8, 2))
+    good = convergence(chain, ("x", "y"), n_ensembles=4)
+    assert good.converged, good.problems
+    chain[:, :8] += 0.5
+    bad = convergence(chain, ("x", "y"), n_ensembles=4)
+    assert not bad.converged and any("R-hat" in p for p in bad.problems)
+    assert np.all(bad.rhat > 1.01)
+
+
+def test_one_ensemble_never_certifies_convergence():
+    chain = np.random.default_rng(6).normal(size=(3000, 32, 2))
+    conv = convergence(chain, ("x", "y"), n_ensembles=1)
+    assert not conv.converged and "at least 4" in conv.problems[0]
+
+
 def test_convergence_flags_a_stuck_chain():
     rng = np.random.default_rng(0)
     # Each walker sits still: R-hat is huge and tau is the whole chain.
     chain = np.repeat(rng.normal(size=(1, 8, 2)), 200, axis=0) + 1e-9 * rng.normal(size=(200, 8, 2))
-    conv = convergence(chain, ("x", "y"))
+    conv = convergence(chain, ("x", "y"), n_ensembles=4)
     assert not conv.converged
     assert any("R-hat" in p for p in conv.problems)
 
@@ -168,7 +193,7 @@ def test_convergence_of_a_chain_with_a_walker_that_never_moved_is_a_verdict_not_
     rng = np.random.default_rng(1)
     chain = rng.normal(size=(30, 8, 2))
     chain[:, 0, 1] = 0.25  # one walker never accepted a move in y: its autocorrelation is 0/0
-    conv = convergence(chain, ("x", "y"))
+    conv = convergence(chain, ("x", "y"), n_ensembles=4)
     assert not conv.converged
     assert any("walker never moved" in p and "y" in p for p in conv.problems)
     assert 0 <= conv.discard <= 15
@@ -195,7 +220,9 @@ def test_killed_fit_resumes_without_losing_a_chunk(tmp_path):
         "--starts",
         "2",
         "--walkers",
-        "32",
+        "20",
+        "--ensembles",
+        "2",
         "--chunk",
         "40",
         "--max-steps",

@@ -9,8 +9,13 @@ the stroke and step tests (load-controlled). Each test has its own noise scale (
 the model misses in that test.
 
 **Data reduction (binning):** a rig samples far faster than quasi-static physics changes, and the cost of a
-likelihood evaluation grows with the number of simulated samples. Consecutive samples are averaged in bins of
-``k``; a bin mean of ``k`` samples carries noise ``sigma / sqrt(k)``. The simulation runs at two points per
+likelihood evaluation grows with the number of simulated samples. Consecutive samples are averaged in bins; a
+bin mean of ``k`` samples carries noise ``sigma / sqrt(k)``. By default each run is cut into its **segments**
+(the ramps and holds of its commanded inputs: where the denoised driving inputs change slope, see
+:func:`segment_starts`) and each segment into :data:`DEFAULT_BINS_PER_SEGMENT` bins of equal sample count, so
+the cost of an evaluation is set by the number of runs and segments, not by the rig's sampling rate (a 100 Hz
+file costs what a 10 Hz file costs); no bin straddles a reversal. ``bin_sizes`` instead bins every ``k``
+samples (discovery uses this). The simulation runs at two points per
 bin (:func:`quadrature_times`) and their mean is compared with the bin mean: exact for any signal cubic in time
 within a bin. (Simulating once at the bin's mean input instead biased a stiffness by 1.5 %, several posterior
 sd, on virtual-rig data.) The step response is not binned by default (its dynamics need every sample).
@@ -24,7 +29,7 @@ bundled TP data at the true parameters, stroke and step residuals are 14 and 21 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import MappingProxyType
 
 import jax
@@ -48,8 +53,16 @@ from ..physics import (
 )
 from .denoise import noise_sd, piecewise_linear_fit
 
-#: Samples averaged per bin, by test (see the module docstring).
+#: Samples averaged per bin, by test, when binning by a fixed count (``prepare(..., bin_sizes=...)``).
 DEFAULT_BIN_SIZES = MappingProxyType({"load_cycle": 4, "blocking": 4, "stroke": 4, "step": 1})
+#: Bins per segment of a run's commanded inputs, by test (the default binning; see the module docstring). A
+#: test not listed (the step response, whose dynamics need every sample) is not binned. Chosen by the model
+#: error it leaves: on virtual-rig data of TP, PR and FC at their bundled true parameters (one specimen, three
+#: repeats, the rig's default noise), the rms residual at the truth over the bin's noise sd is 0.95-1.14 with
+#: 100 bins per segment, 0.94-1.14 with bins of four samples; 64 bins per segment give up to 1.30 and 24 up to
+#: 5.3 (wide bins hold curvature the two-node quadrature misses). At the bundled 20 Hz a segment of 400
+#: samples then costs what bins of four did; at 100 Hz, a fifth.
+DEFAULT_BINS_PER_SEGMENT = MappingProxyType({"load_cycle": 100, "blocking": 100, "stroke": 100})
 #: The observed signal and its noise parameter, by test.
 OBSERVED = MappingProxyType(
     {
@@ -75,13 +88,18 @@ STEP_SUBSTEPS = 2
 #: Largest solver equilibrium error (``max_residual`` of a simulation) accepted, by test: [m] where strain is
 #: imposed, [N] where force is (the step's inertial residual sits near 1e-5 N when converged).
 SOLVER_TOLERANCE = MappingProxyType({"load_cycle": 1e-6, "blocking": 1e-6, "stroke": 1e-2, "step": 1e-2})
-#: Per-specimen log stiffness factor, (n_specimens,), an optional entry of the parameters (see :func:`predict`).
+#: Per-specimen log factors, an optional entry of the parameters (see :func:`predict`): either one (n_specimens,)
+#: array applied to every :data:`SPECIMEN_SCALED` parameter, or a mapping name -> (n_specimens,) log factor of
+#: that parameter alone.
 SPECIMEN_OFFSET = "specimen_log_offset"
 #: Parameters scaled by a specimen's stiffness factor: every stiffness of the tube wall (the rig's specimens
 #: differ by hand-making: film thickness, bonding).
 SPECIMEN_SCALED = frozenset(
     {"tensile_ka_n_per_m", "tensile_kb_n_per_m2", "bending_k1_n", "bending_k2_n", "extension_k_n_per_m"}
 )
+#: Parameters that differ between specimens of one material in the hierarchical model: the wall stiffnesses and
+#: the compliance of the mount each specimen was clamped in.
+SPECIMEN_VARYING = SPECIMEN_SCALED | {"mount_compliance_m_per_n"}
 #: Degrees of freedom of the Student-t option.
 STUDENT_T_DOF = 4.0
 
@@ -149,26 +167,30 @@ jax.tree_util.register_dataclass(
 
 @dataclass(frozen=True, eq=False)
 class Observations:
-    """A dataset reduced for the likelihood: run groups and the specimen names they index."""
+    """A dataset reduced for the likelihood: run groups and the specimen names they index; ``bin_sizes``
+    (test -> samples per bin) for tests binned by count, ``bins_per_segment`` (test -> bins per input
+    segment) for the others."""
 
     specimens: tuple[str, ...]
     groups: tuple[RunGroup, ...]
     bin_sizes: MappingProxyType
     geometry: Geometry
+    bins_per_segment: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))
 
     @property
     def n_bins(self) -> int:
         return sum(g.n_bins for g in self.groups)
 
 
-def bin_means(values: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
-    """Means of consecutive bins of ``k`` samples of ``values`` (n,), the last bin possibly shorter.
+def bin_means(values: np.ndarray, k: int | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Means of consecutive bins of ``values`` (n,): bins of ``k`` samples (the last possibly shorter), or,
+    with ``k`` an int array (m,), bins starting at those sample indices (increasing, first 0).
 
     Returns ``(means (m,), counts (m,))``; NaN samples are left out of their bin's mean and count.
     """
     values = np.asarray(values, dtype=float)
     n = values.shape[0]
-    starts = np.arange(0, n, k)
+    starts = np.arange(0, n, k) if np.ndim(k) == 0 else np.asarray(k, dtype=int)
     finite = np.isfinite(values)
     sums = np.add.reduceat(np.where(finite, values, 0.0), starts)
     counts = np.add.reduceat(finite.astype(float), starts)
@@ -176,11 +198,12 @@ def bin_means(values: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
         return np.where(counts > 0, sums / np.maximum(counts, 1.0), np.nan), counts
 
 
-def quadrature_times(time_s: np.ndarray, k: int) -> np.ndarray:
-    """(2 m,) two simulation times per bin of ``k`` samples: the bin's mean time -+ the sd of its sample
-    times. The mean of a signal at these two points equals its mean over the bin's samples for any cubic in
-    time (same mean and variance of the nodes), so binned data are compared with binned predictions without
-    the curvature bias of simulating at the bin's mean input. A one-sample bin gets -+ a quarter interval."""
+def quadrature_times(time_s: np.ndarray, k: int | np.ndarray) -> np.ndarray:
+    """(2 m,) two simulation times per bin (of ``k`` samples, or starting at the indices ``k``, see
+    :func:`bin_means`): the bin's mean time -+ the sd of its sample times. The mean of a signal at these two
+    points equals its mean over the bin's samples for any cubic in time (same mean and variance of the nodes),
+    so binned data are compared with binned predictions without the curvature bias of simulating at the bin's
+    mean input. A one-sample bin gets -+ a quarter interval."""
     time_s = np.asarray(time_s, dtype=float)
     centre, counts = bin_means(time_s, k)
     square, _ = bin_means(time_s**2, k)
@@ -188,6 +211,43 @@ def quadrature_times(time_s: np.ndarray, k: int) -> np.ndarray:
     single = counts <= 1
     spread[single] = 0.25 * float(np.min(np.diff(time_s))) if time_s.size > 1 else 0.0
     return np.stack([centre - spread, centre + spread], axis=1).ravel()
+
+
+#: A change of slope of a denoised input larger than this fraction of its range per sample marks a segment
+#: boundary (the fitted inputs are exactly piecewise linear, so inside a segment the change is round-off).
+SLOPE_CHANGE_TOLERANCE = 1e-6
+
+
+def segment_starts(inputs: list[np.ndarray]) -> np.ndarray:
+    """Indices where a run's segments start (first 0): the samples after which any of the denoised driving
+    ``inputs`` (each (n,)) changes slope or jumps (its second difference exceeds
+    :data:`SLOPE_CHANGE_TOLERANCE` of its range)."""
+    n = inputs[0].shape[0]
+    cuts = {0}
+    for x in inputs:
+        x = np.asarray(x, dtype=float)
+        span = np.nanmax(x) - np.nanmin(x) if np.any(np.isfinite(x)) else 0.0
+        if not span > 0.0 or n < 3:
+            continue
+        d2 = np.abs(np.diff(x, 2))
+        cuts.update((np.flatnonzero(d2 > SLOPE_CHANGE_TOLERANCE * span) + 1).tolist())
+    return np.array(sorted(cuts))
+
+
+def segment_bins(starts: np.ndarray, n: int, per_segment: int) -> np.ndarray:
+    """Start indices of the bins: each segment (``starts``, (s,), of ``n`` samples) cut into ``per_segment``
+    bins of nearly equal sample count (fewer when the segment is shorter). Consecutive segment starts one
+    sample apart (a kink the fit spread over two samples) are merged first."""
+    kept = [int(starts[0])]
+    for a in starts[1:]:
+        if a - kept[-1] > 1:
+            kept.append(int(a))
+    edges = kept + [n]
+    out = []
+    for a, b in zip(edges[:-1], edges[1:], strict=True):
+        m = min(per_segment, b - a)
+        out.extend(np.unique(a + np.floor(np.linspace(0.0, b - a, m + 1)[:-1]).astype(int)).tolist())
+    return np.array(out)
 
 
 #: Spread of the repeated nodes of a short last bin, in units of the shortest sample interval (see
@@ -220,29 +280,64 @@ def sample_times(time_s: np.ndarray, k: int) -> np.ndarray:
     return np.concatenate([time_s[:full], tail])
 
 
-def _reduce_run(run, k: int, denoise: bool, every_sample: bool = False) -> dict:
-    """One run binned by ``k``: simulation times and inputs (two per bin, :func:`quadrature_times`, or with
-    ``every_sample`` ``k`` per bin, :func:`sample_times`; driving inputs denoised), observed bin means, counts,
-    and the raw noise sd of each driving input (for :func:`_share_repeats`)."""
+#: Segmentations of two runs whose segment starts differ by at most this fraction of the run's samples are
+#: taken to be the same commanded protocol: the later run is binned like the earlier one (so repeats can share a
+#: simulation, :func:`_share_repeats`; the denoising places a reversal within a few samples of where it was).
+SNAP_FRACTION = 0.03
+
+
+def _snap(segments: np.ndarray, known: list, n: int) -> np.ndarray:
+    """``segments``, or an earlier run's from ``known`` (updated) when every start is within
+    :data:`SNAP_FRACTION` of ``n`` samples of it."""
+    for other in known:
+        if other.shape == segments.shape and np.max(np.abs(other - segments)) <= max(2, SNAP_FRACTION * n):
+            return other
+    known.append(segments)
+    return segments
+
+
+def _reduce_run(
+    run,
+    k: int | None,
+    denoise: bool,
+    every_sample: bool = False,
+    per_segment: int | None = None,
+    known_segments: list | None = None,
+) -> dict:
+    """One run binned by ``k`` samples, or (``per_segment``) into that many bins per segment of its denoised
+    driving inputs (:func:`segment_bins`; segmentations of earlier runs of the protocol in ``known_segments``
+    reused, see :data:`SNAP_FRACTION`): simulation times and inputs (two per bin, :func:`quadrature_times`, or
+    with ``every_sample`` ``k`` per bin, :func:`sample_times`; driving inputs denoised), observed bin means,
+    counts, and the raw noise sd of each driving input (for :func:`_share_repeats`)."""
     signal, _ = OBSERVED[run.test]
     driving = DRIVING_INPUTS[run.test] if denoise else ()
     if run.test == "step" and run.supply_pa is None:
         raise ValueError(f"step run {run.key} has no supply pressure; the step likelihood needs supply_kpa")
-    out, input_sd = {}, {}
+    out, input_sd, fitted = {}, {}, {}
+    for name in ("strain", "pressure_pa", "supply_pa"):
+        raw = getattr(run, name)
+        if raw is not None and name in driving:
+            input_sd[name] = noise_sd(raw)
+            raw = piecewise_linear_fit(run.time_s, raw, input_sd[name])
+        fitted[name] = raw
+    if per_segment is not None:
+        smooth = [
+            fitted[name] if name in driving else piecewise_linear_fit(run.time_s, fitted[name])
+            for name in DRIVING_INPUTS[run.test]
+            if fitted[name] is not None
+        ]
+        n = run.time_s.shape[0]
+        known = [] if known_segments is None else known_segments
+        segments = _snap(segment_bins(segment_starts(smooth), n, 1), known, n)
+        k = segment_bins(segments, n, per_segment)
+    one_per_bin = np.ndim(k) == 0 and k == 1
     centre, _ = bin_means(run.time_s, k)
-    if k == 1:
+    if one_per_bin:
         sim_time = run.time_s
     else:
         sim_time = sample_times(run.time_s, k) if every_sample else quadrature_times(run.time_s, k)
-    for name in ("strain", "pressure_pa", "supply_pa"):
-        raw = getattr(run, name)
-        if raw is None:
-            out[name] = None
-            continue
-        if name in driving:
-            input_sd[name] = noise_sd(raw)
-            raw = piecewise_linear_fit(run.time_s, raw, input_sd[name])
-        out[name] = np.interp(sim_time, run.time_s, raw) if k > 1 else raw
+    for name, values in fitted.items():
+        out[name] = None if values is None else (values if one_per_bin else np.interp(sim_time, run.time_s, values))
     out["time_s"] = sim_time
     out["bin_time_s"] = centre
     out["observed"], out["counts"] = bin_means(getattr(run, signal), k)
@@ -282,24 +377,40 @@ def _share_repeats(members: list) -> tuple[np.ndarray, np.ndarray]:
 
 def prepare(
     dataset: Dataset,
-    bin_sizes=DEFAULT_BIN_SIZES,
+    bin_sizes=None,
     *,
+    bins_per_segment=DEFAULT_BINS_PER_SEGMENT,
     stroke_load_n: float = 5.5,
     denoise_inputs: bool = True,
     share_repeats: bool = True,
     every_sample: frozenset = frozenset(),
 ) -> Observations:
     """Reduce ``dataset`` for the likelihood: denoise the driving inputs (``denoise_inputs``, see
-    :data:`DRIVING_INPUTS`), bin every run (``bin_sizes`` by test), stack runs of a test that have the same
-    number of bins, and let repeats of one protocol share a simulation from their averaged denoised inputs
-    (``share_repeats``; only with ``denoise_inputs``). ``stroke_load_n`` [N] is used where a stroke run
-    records no load. Tests in ``every_sample`` are simulated at every sample and the predictions averaged per
-    bin (:func:`sample_times`) instead of at two quadrature nodes per bin."""
-    bin_sizes = MappingProxyType({**DEFAULT_BIN_SIZES, **dict(bin_sizes)})
+    :data:`DRIVING_INPUTS`), bin every run, stack runs of a test that have the same number of bins, and let
+    repeats of one protocol share a simulation from their averaged denoised inputs (``share_repeats``; only
+    with ``denoise_inputs``). ``stroke_load_n`` [N] is used where a stroke run records no load.
+
+    Binning: by default each segment of a run's inputs is cut into ``bins_per_segment[test]`` bins (see the
+    module docstring; tests not listed are not binned). ``bin_sizes`` (test -> samples per bin, missing tests
+    from :data:`DEFAULT_BIN_SIZES`) bins by a fixed count instead. Tests in ``every_sample`` (fixed-count
+    binning only) are simulated at every sample and the predictions averaged per bin (:func:`sample_times`)
+    instead of at two quadrature nodes per bin."""
+    if bin_sizes is not None:
+        bin_sizes = MappingProxyType({**DEFAULT_BIN_SIZES, **dict(bin_sizes)})
+        per_segment = MappingProxyType({})
+    else:
+        per_segment = MappingProxyType(dict(bins_per_segment))
+        bin_sizes = MappingProxyType({t: 1 for t in OBSERVED if t not in per_segment})
+        if every_sample & set(per_segment):
+            raise ValueError("every_sample needs fixed-count bins: pass bin_sizes for those tests")
     specimens = tuple(dataset.specimens)
     buckets: dict[tuple[str, int], list] = {}
+    segmentations: dict[tuple, list] = {}
     for run in dataset.runs:
-        reduced = _reduce_run(run, bin_sizes[run.test], denoise_inputs, run.test in every_sample)
+        known = segmentations.setdefault((run.test, run.specimen, run.time_s.shape[0]), [])
+        reduced = _reduce_run(
+            run, bin_sizes.get(run.test), denoise_inputs, run.test in every_sample, per_segment.get(run.test), known
+        )
         if reduced["load_n"] is None:
             if run.test == "step":
                 raise ValueError(f"step run {run.key} records no load; the step likelihood needs load_n")
@@ -333,7 +444,7 @@ def prepare(
                 shared=shared,
             )
         )
-    return Observations(specimens, tuple(groups), bin_sizes, dataset.geometry)
+    return Observations(specimens, tuple(groups), bin_sizes, dataset.geometry, per_segment)
 
 
 def _simulate(test: str, params, time_s, strain, pressure_pa, supply_pa, load_n, config, geometry):
@@ -355,18 +466,21 @@ def _simulate(test: str, params, time_s, strain, pressure_pa, supply_pa, load_n,
 def predict(params, group: RunGroup, *, config: ModelConfig = DEFAULT_CONFIG, geometry: Geometry = PAPER_GEOMETRY):
     """Predicted observed signal (r, m) of every run in ``group`` and each run's solver error (r,).
 
-    ``params``: model parameters by name, each a scalar (shared) or an array of shape (n_specimens,); with
+    ``params``: model parameters by name, each a scalar (shared) or an array of shape (n_specimens,). With
     ``specimen_log_offset`` (n_specimens,) the :data:`SPECIMEN_SCALED` parameters of specimen ``s`` are
-    multiplied by ``exp(specimen_log_offset[s])`` (one stiffness factor per specimen).
+    multiplied by ``exp(specimen_log_offset[s])`` (one stiffness factor per specimen); with a mapping
+    ``{name: (n_specimens,)}`` each named parameter of specimen ``s`` is multiplied by its own
+    ``exp(offset[name][s])`` (the hierarchical model of :class:`~peano_bayes.inference.posterior.Posterior`).
     """
     offset = params.get(SPECIMEN_OFFSET)
     params = {k: v for k, v in params.items() if k != SPECIMEN_OFFSET}
+    if offset is not None and not isinstance(offset, dict):
+        offset = {k: offset for k in SPECIMEN_SCALED if k in params}
 
     def one(specimen, time_s, strain, pressure, supply, load):
         p = {k: (v[specimen] if jnp.ndim(v) else v) for k, v in params.items()}
         if offset is not None:
-            factor = jnp.exp(offset[specimen])
-            p = {k: v * factor if k in SPECIMEN_SCALED else v for k, v in p.items()}
+            p = {k: v * jnp.exp(offset[k][specimen]) if k in offset else v for k, v in p.items()}
         return _simulate(group.test, p, time_s, strain, pressure, supply, load, config, geometry)
 
     supply = group.supply_pa if group.supply_pa is not None else group.pressure_pa
@@ -453,10 +567,12 @@ def log_likelihood(params, observations: Observations, **kwargs):
 
 __all__ = [
     "DEFAULT_BIN_SIZES",
+    "DEFAULT_BINS_PER_SEGMENT",
     "DRIVING_INPUTS",
     "NOISE_PARAMETERS",
     "SPECIMEN_OFFSET",
     "SPECIMEN_SCALED",
+    "SPECIMEN_VARYING",
     "OBSERVED",
     "SOLVER_TOLERANCE",
     "Observations",
@@ -470,4 +586,6 @@ __all__ = [
     "prepare",
     "quadrature_times",
     "sample_times",
+    "segment_bins",
+    "segment_starts",
 ]

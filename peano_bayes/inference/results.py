@@ -1,7 +1,9 @@
 """Results of one dataset: an arviz ``InferenceData`` (``posterior.nc``) and ``summary.json``, written atomically.
 
 Groups: ``posterior`` (kept draws, thinned to at most :data:`MAX_DRAWS_PER_WALKER` per walker; values in SI
-units under the parameter names, walkers as chains), ``sample_stats`` (``lp``), ``prior`` (draws from the prior
+units, walkers as chains: the **population** value under each parameter's name and, for the parameters that
+differ between specimens, ``specimen__<name>`` (dim ``specimen``) and ``new_specimen__<name>``, see
+:meth:`~peano_bayes.inference.posterior.Posterior.levels`), ``sample_stats`` (``lp``), ``prior`` (draws from the prior
 file), and, on an evenly spaced subset of :data:`POINTWISE_DRAWS_PER_WALKER` draws per walker (their ``draw``
 coordinate says which), ``log_likelihood`` (``y``: every measured bin) and ``posterior_predictive`` (``y``: the
 prediction plus Gaussian noise of the bin's scale), with ``observed_data`` (``y`` and, per bin, its test,
@@ -30,6 +32,9 @@ from .priors import load_prior
 from .sample import SampleResult
 
 MAX_DRAWS_PER_WALKER = 250
+#: Prefixes of the hierarchy's specimen-level and new-specimen variables in the ``posterior`` group.
+SPECIMEN_PREFIX = "specimen__"
+NEW_SPECIMEN_PREFIX = "new_specimen__"
 POINTWISE_DRAWS_PER_WALKER = 8
 PRIOR_DRAWS = 1000
 PACKAGES = ("peano_bayes", "jax", "optimistix", "emcee", "arviz", "numpy")
@@ -45,13 +50,11 @@ def package_versions() -> dict[str, str]:
     return out
 
 
-def physical_draws(posterior: Posterior, thetas: np.ndarray) -> dict[str, np.ndarray]:
-    """name -> values [SI] for thetas (..., D): the prior's parameters in SI, contrasts as they are."""
-    d = posterior.prior.ndim
-    out = {k: np.asarray(v) for k, v in posterior.prior.from_unconstrained(thetas[..., :d]).items()}
-    for j, name in enumerate(posterior.names[d:]):
-        out[name] = np.asarray(thetas[..., d + j])
-    return out
+def physical_draws(posterior: Posterior, thetas: np.ndarray, seed: int = 0) -> dict[str, np.ndarray]:
+    """name -> values [SI] for thetas (..., D): the hierarchy's levels (:meth:`Posterior.levels`: population
+    values under the parameters' names, ``specimen__<name>`` (..., n_specimens), ``new_specimen__<name>``),
+    contrasts as they are."""
+    return posterior.levels(thetas, np.random.default_rng([seed, 4]))
 
 
 def _predictions(posterior: Posterior, thetas: np.ndarray, rng: np.random.Generator):
@@ -92,12 +95,13 @@ def to_inference_data(posterior: Posterior, result: SampleResult, *, seed: int, 
     observed = posterior.observed()
     prior_theta = posterior.prior.sample(np.random.default_rng([seed, 3]), PRIOR_DRAWS)
     prior_draws = {k: np.asarray(v)[None] for k, v in posterior.prior.from_unconstrained(prior_theta).items()}
-    post_draws = physical_draws(posterior, kept)
+    post_draws = physical_draws(posterior, kept, seed)
     bin_coords = {"bin": np.arange(n_bins)}
     idata = az.from_dict(
         posterior=post_draws,
         sample_stats={"lp": lp},
-        coords={"draw": draws + result.convergence.discard},
+        coords={"draw": draws + result.convergence.discard, "specimen": list(posterior.observations.specimens)},
+        dims={k: ["specimen"] for k in post_draws if k.startswith(SPECIMEN_PREFIX)},
     )
     pointwise = az.from_dict(
         log_likelihood={"y": ll},
@@ -171,6 +175,24 @@ def parameter_table(idata, names, hdi_prob: float = 0.94) -> dict:
     }
 
 
+def posterior_contraction(idata, names) -> dict[str, float]:
+    """name -> 1 - posterior variance / prior variance of each parameter in ``names``, in the log of the value
+    for positive parameters (the sampler's scale) and the value itself otherwise; from the result's
+    ``posterior`` (population values) and ``prior`` groups. Near 1: the data determine the parameter; near 0:
+    its posterior is its prior."""
+    out = {}
+    for name in names:
+        if name not in idata.posterior or "prior" not in idata.groups() or name not in idata.prior:
+            continue
+        post = np.asarray(idata.posterior[name].values, float).reshape(-1)
+        prior = np.asarray(idata.prior[name].values, float).reshape(-1)
+        if np.all(post > 0) and np.all(prior > 0):
+            post, prior = np.log(post), np.log(prior)
+        variance = float(np.var(prior))
+        out[name] = float(1.0 - np.var(post) / variance) if variance > 0 else float("nan")
+    return out
+
+
 # --- reading a result -----------------------------------------------------------------------------------------
 
 
@@ -185,16 +207,27 @@ def draw_indices(total: int, n_draws: int) -> np.ndarray:
     return np.linspace(0, total - 1, n_draws).round().astype(int)
 
 
-def parameter_draws(idata, n_draws: int, seed: int = 0) -> tuple[list[dict], tuple[str, ...]]:
-    """``n_draws`` parameter sets [SI] of the typical specimen (specimen offset 0) from a result, evenly spaced
-    over the stored posterior, and the names drawn from the prior instead (see
-    :class:`~peano_bayes.metrics.PosteriorMetrics`).
+#: The levels of the hierarchy a reader of a result can ask for (see :func:`parameter_draws`).
+LEVELS = ("new_specimen", "population")
+
+
+def parameter_draws(
+    idata, n_draws: int, seed: int = 0, *, level: str = "new_specimen"
+) -> tuple[list[dict], tuple[str, ...]]:
+    """``n_draws`` parameter sets [SI] from a result, evenly spaced over the stored posterior, and the names
+    drawn from the prior instead (see :class:`~peano_bayes.metrics.PosteriorMetrics`).
+
+    ``level``: ``"new_specimen"`` (default), a specimen not yet made, so the sets carry the between-specimen
+    spread (what a designer building one more muscle gets); ``"population"``, the material's population value.
+    Results without a specimen hierarchy (one specimen) have one level.
 
     Every name the result's configuration reads: posterior draw if sampled; else the ``fixed_parameters``
     attribute or the nominal value (shape constants held in the fit); except step-only parameters
     (:data:`~peano_bayes.inference.posterior.STEP_ONLY_PARAMETERS`) of a fit without the step test, which are
     drawn from the prior the fit used (the result's ``prior`` attribute: a file or a material code) so the step
     metrics carry honest (prior) uncertainty."""
+    if level not in LEVELS:
+        raise PeanoBayesInputError(f"level must be one of {', '.join(LEVELS)}, got {level!r}")
     attrs = idata.posterior.attrs
     config = result_config(idata)
     material = attrs["material"]
@@ -215,7 +248,9 @@ def parameter_draws(idata, n_draws: int, seed: int = 0) -> tuple[list[dict], tup
     for i, j in enumerate(pick):
         params = {}
         for n in names:
-            if n in post:
+            if level == "new_specimen" and NEW_SPECIMEN_PREFIX + n in post:
+                params[n] = float(post[NEW_SPECIMEN_PREFIX + n].values[j])
+            elif n in post:
                 params[n] = float(post[n].values[j])
             elif n in prior_values:
                 params[n] = float(np.asarray(prior_values[n])[i])
@@ -251,11 +286,15 @@ def load_result(path: str | Path):
 
 
 __all__ = [
+    "LEVELS",
+    "NEW_SPECIMEN_PREFIX",
+    "SPECIMEN_PREFIX",
     "load_result",
     "package_versions",
     "parameter_draws",
     "parameter_table",
     "physical_draws",
+    "posterior_contraction",
     "result_config",
     "to_inference_data",
     "write_netcdf",

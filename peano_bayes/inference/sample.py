@@ -1,8 +1,9 @@
 """Ensemble MCMC (emcee) over a :class:`~peano_bayes.inference.posterior.Posterior`, in resumable chunks.
 
 One jit+vmap log posterior is handed to emcee with ``vectorize=True`` (emcee's red-blue moves evaluate half
-ensembles, so it compiles for two batch sizes). Walkers start from the Laplace approximation of the
-least-squares fit. The run has two phases:
+ensembles, so it compiles for two batch sizes). A run is :data:`~peano_bayes.defaults.DEFAULT_ENSEMBLES`
+independent ensembles, each started from its own overdispersed draws around the Laplace approximation of the
+posterior mode, and advanced chunk by chunk side by side. Each ensemble has two phases:
 
 - **Warm-up** (``warmup`` steps in :data:`WARMUP_ROUNDS` rounds, discarded): the first round uses the
   differential-evolution mix :data:`MOVES`; after each round a multivariate-t independence proposal
@@ -15,7 +16,9 @@ least-squares fit. The run has two phases:
 
   - the kept chain (after the warm-up and a further ``2 tau_max``) is at least ``50 tau_max`` long (emcee's
     own reliability rule for its integrated autocorrelation time ``tau``),
-  - R-hat <= 1.01 and bulk ESS >= 1000 for every parameter (arviz, walkers as chains, on the kept draws),
+  - R-hat <= 1.01 across the ensembles and bulk and tail ESS >= 1000 for every parameter (arviz, on the kept
+    draws, each ensemble's walkers pooled into one chain: the walkers of one ensemble move together and are
+    not the independent chains R-hat assumes),
 
   or until ``max_steps``; a run stopped by the limit is returned with ``converged=False``.
 
@@ -24,7 +27,8 @@ Why the independence move: the affine-invariant DE moves handle linear correlati
 proposal shaped like the posterior decorrelates a walker in one accepted step wherever the posterior is
 close to elliptical, and the DE moves keep exploring where it is not (see :data:`ADAPTED_MOVES`).
 
-After every warm-up round and chunk the whole state (chain, log posterior, RNG state) is written atomically to
+After every warm-up round and chunk the whole state (chain, log posterior, RNG state per ensemble) is written
+atomically to
 ``state_path``; with ``resume=True`` a run continues from it, and because the RNG state is restored it gives
 the same numbers as a run that was never interrupted.
 """
@@ -46,13 +50,18 @@ import numpy as np
 from scipy import stats
 
 from ..atomic import write_bytes
-from ..defaults import DEFAULT_CHUNK, DEFAULT_MAX_STEPS, DEFAULT_WARMUP
+from ..defaults import DEFAULT_CHUNK, DEFAULT_ENSEMBLES, DEFAULT_MAX_STEPS, DEFAULT_WARMUP
 from ..errors import PeanoBayesError, PeanoBayesInputError
 from .posterior import Posterior
 
-#: Convergence targets: chains of at least 50 integrated autocorrelation times, split R-hat <= 1.01 and bulk
-#: ESS >= 1000 for every parameter.
-TARGETS = {"min_tau_lengths": 50.0, "max_rhat": 1.01, "min_ess_bulk": 1000.0}
+#: Convergence targets: chains of at least 50 integrated autocorrelation times, rank-normalized split R-hat
+#: across the ensembles <= 1.01, bulk and tail ESS >= 1000 for every parameter.
+TARGETS = {"min_tau_lengths": 50.0, "max_rhat": 1.01, "min_ess_bulk": 1000.0, "min_ess_tail": 1000.0}
+#: Fewest independently started ensembles whose comparison (R-hat) can certify convergence.
+MIN_ENSEMBLES = 4
+#: Each ensemble starts from N(centre, (START_INFLATION sd)^2): overdispersed against the Laplace
+#: approximation, so an ensemble that cannot leave its start shows in R-hat.
+START_INFLATION = 2.0
 #: Moves before any proposal is fitted (emcee's recommended differential-evolution mix).
 MOVES = ((emcee.moves.DEMove, 0.8), (emcee.moves.DESnookerMove, 0.2))
 #: Weights once the independence proposal is fitted: DE, snooker, independence. Measured on the bundled TP
@@ -139,8 +148,9 @@ def proposal_at(chain: np.ndarray, step: int, warmup: int) -> IndependencePropos
 
 @dataclass(frozen=True, eq=False)
 class Convergence:
-    """Figures of a chain: ``tau`` (D,) integrated autocorrelation time [steps]; ``discard`` burn-in [steps];
-    ``tau_lengths`` kept length over ``tau_max``; ``rhat``/``ess_bulk``/``ess_tail`` (D,) on the kept draws;
+    """Figures of a run of ``n_ensembles`` ensembles: ``tau`` (D,) integrated autocorrelation time [steps], the
+    largest over the ensembles; ``discard`` burn-in [steps]; ``tau_lengths`` kept length over ``tau_max``;
+    ``rhat``/``ess_bulk``/``ess_tail`` (D,) on the kept draws, each ensemble's walkers pooled into one chain;
     ``converged`` whether every target of :data:`TARGETS` holds; ``problems`` what misses, in words."""
 
     tau: np.ndarray
@@ -151,12 +161,14 @@ class Convergence:
     ess_tail: np.ndarray
     converged: bool
     problems: tuple[str, ...]
+    n_ensembles: int = 1
 
     def as_dict(self, names) -> dict:
         per = lambda a: {n: float(v) for n, v in zip(names, a, strict=True)}  # noqa: E731
         return {
             "converged": self.converged,
             "problems": list(self.problems),
+            "n_ensembles": self.n_ensembles,
             "discard_steps": self.discard,
             "tau_steps": per(self.tau),
             "tau_lengths": self.tau_lengths,
@@ -169,9 +181,10 @@ class Convergence:
 
 @dataclass(frozen=True, eq=False)
 class SampleResult:
-    """``chain`` (steps, walkers, D) theta; ``log_prob`` (steps, walkers); ``convergence``; ``names``;
-    ``seconds`` of sampling (this process, compile included); ``acceptance`` mean fraction; ``resumed_from``
-    steps loaded from the state file (0 for a fresh run)."""
+    """``chain`` (steps, walkers, D) theta, the ensembles' walkers side by side (ensemble ``e`` holds walkers
+    ``e W`` to ``(e + 1) W - 1``); ``log_prob`` (steps, walkers); ``convergence``; ``names``; ``seconds`` of
+    sampling (this process, compile included); ``acceptance`` mean fraction; ``resumed_from`` steps loaded from
+    the state file (0 for a fresh run); ``n_ensembles``."""
 
     names: tuple[str, ...]
     chain: np.ndarray
@@ -181,26 +194,48 @@ class SampleResult:
     acceptance: float
     resumed_from: int = 0
     chunks: list = field(default_factory=list)
+    n_ensembles: int = 1
 
     def kept(self) -> np.ndarray:
         """(walkers, draws, D) after burn-in."""
         return self.chain[self.convergence.discard :].swapaxes(0, 1)
 
 
-def convergence(chain: np.ndarray, names=None, start: int = 0) -> Convergence:
-    """Convergence figures of ``chain`` (steps, walkers, D) after its first ``start`` steps (the warm-up)
-    against :data:`TARGETS`; ``discard`` counts from the chain's first step."""
+def pooled(chain: np.ndarray, n_ensembles: int) -> np.ndarray:
+    """(n_ensembles, walkers_per_ensemble * steps, ...) from ``chain`` (steps, walkers, ...): each ensemble's
+    walkers laid end to end as one chain (the unit R-hat compares: walkers of one ensemble are not independent
+    chains, Foreman-Mackey on emcee issue 183)."""
+    steps, walkers = chain.shape[:2]
+    per = walkers // n_ensembles
+    rest = chain.shape[2:]
+    split = chain.reshape((steps, n_ensembles, per) + rest)
+    return np.moveaxis(split, 0, 2).reshape((n_ensembles, per * steps) + rest)
+
+
+def convergence(chain: np.ndarray, names=None, start: int = 0, n_ensembles: int = 1) -> Convergence:
+    """Convergence figures of ``chain`` (steps, walkers, D) of ``n_ensembles`` independently started ensembles
+    after its first ``start`` steps (the warm-up) against :data:`TARGETS`; ``discard`` counts from the chain's
+    first step.
+
+    The autocorrelation time is emcee's, per ensemble (the largest is kept); R-hat (rank-normalized split, arviz)
+    compares the ensembles, each ensemble's walkers pooled into one chain; bulk and tail ESS are arviz's on the
+    same pooled chains. With one ensemble R-hat cannot compare ensembles: it is computed with the walkers as
+    chains and the run is never called converged."""
     sampled = chain[start:]
-    steps = sampled.shape[0]
+    steps, walkers, ndim = sampled.shape
+    per = walkers // n_ensembles
     with np.errstate(invalid="ignore", divide="ignore"):  # a parameter no walker moved has no defined tau
-        tau = emcee.autocorr.integrated_time(sampled, tol=0)
-    stuck = ~np.isfinite(tau)
-    tau = np.where(stuck, np.inf, tau)
+        taus = np.array(
+            [emcee.autocorr.integrated_time(sampled[:, e * per : (e + 1) * per], tol=0) for e in range(n_ensembles)]
+        )
+    stuck = ~np.all(np.isfinite(taus), axis=0)
+    tau = np.where(stuck, np.inf, np.max(np.where(np.isfinite(taus), taus, np.inf), axis=0))
     tau_max = float(np.max(tau))
     discard = min(int(np.ceil(2.0 * tau_max)), steps // 2) if np.isfinite(tau_max) else steps // 2
-    kept = sampled[discard:].swapaxes(0, 1)
+    kept = sampled[discard:]
     discard += start
-    draws = {f"p{i}": kept[..., i] for i in range(kept.shape[-1])}
+    chains = pooled(kept, n_ensembles) if n_ensembles > 1 else kept.swapaxes(0, 1)
+    draws = {f"p{i}": chains[..., i] for i in range(ndim)}
     data = az.convert_to_dataset(draws)
     rhat = np.array([float(az.rhat(data)[k]) for k in draws])
     ess_bulk = np.array([float(az.ess(data, method="bulk")[k]) for k in draws])
@@ -208,6 +243,10 @@ def convergence(chain: np.ndarray, names=None, start: int = 0) -> Convergence:
     names = list(names) if names is not None else list(draws)
     lengths = (chain.shape[0] - discard) / tau_max
     problems = []
+    if n_ensembles < MIN_ENSEMBLES:
+        problems.append(
+            f"{n_ensembles} ensemble(s): R-hat needs at least {MIN_ENSEMBLES} independently started ensembles"
+        )
     if stuck.any():
         which = ", ".join(names[i] for i in np.flatnonzero(stuck)[:4])
         problems.append(f"autocorrelation time undefined (a walker never moved) for {which}")
@@ -216,17 +255,21 @@ def convergence(chain: np.ndarray, names=None, start: int = 0) -> Convergence:
     for label, values, bad in (
         ("R-hat", rhat, ~(rhat <= TARGETS["max_rhat"])),
         ("bulk ESS", ess_bulk, ~(ess_bulk >= TARGETS["min_ess_bulk"])),
+        ("tail ESS", ess_tail, ~(ess_tail >= TARGETS["min_ess_tail"])),
     ):
         if bad.any():
             worst = ", ".join(f"{names[i]} {values[i]:.3g}" for i in np.flatnonzero(bad)[:4])
             problems.append(f"{label} misses its target for {int(bad.sum())} parameter(s): {worst}")
-    return Convergence(tau, discard, lengths, rhat, ess_bulk, ess_tail, not problems, tuple(problems))
+    return Convergence(tau, discard, lengths, rhat, ess_bulk, ess_tail, not problems, tuple(problems), n_ensembles)
 
 
-def initial_walkers(posterior: Posterior, centre: np.ndarray, covariance: np.ndarray, n_walkers: int, seed: int):
+def initial_walkers(
+    posterior: Posterior, centre: np.ndarray, covariance: np.ndarray, n_walkers: int, seed: int, ensemble: int = 0
+):
     """``n_walkers`` points (n_walkers, D) from N(centre, covariance), each with a finite log posterior
-    (redrawn up to 50 times, shrinking the spread). Raises if none can be found."""
-    rng = np.random.default_rng([seed, 1])
+    (redrawn up to 50 times, shrinking the spread); ``ensemble`` selects an independent random stream. Raises
+    if none can be found."""
+    rng = np.random.default_rng([seed, 1, ensemble] if ensemble else [seed, 1])
     f = posterior.batched
     cov = np.array(covariance, dtype=float)
     walkers = rng.multivariate_normal(centre, cov, size=n_walkers, method="eigh")
@@ -244,13 +287,13 @@ def initial_walkers(posterior: Posterior, centre: np.ndarray, covariance: np.nda
     )
 
 
-def _save_state(path: Path, chain, log_prob, random_state, meta: dict) -> None:
+def _save_state(path: Path, chain, log_prob, random_states, meta: dict) -> None:
     buffer = io.BytesIO()
     np.savez(
         buffer,
         chain=chain,
         log_prob=log_prob,
-        rng=np.frombuffer(json.dumps(_rng_to_json(random_state)).encode(), dtype=np.uint8),
+        rng=np.frombuffer(json.dumps([_rng_to_json(r) for r in random_states]).encode(), dtype=np.uint8),
         meta=np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8),
     )
     write_bytes(path, buffer.getvalue())
@@ -267,19 +310,29 @@ def _rng_from_json(data) -> tuple:
 
 
 def load_state(path: str | os.PathLike):
-    """``(chain, log_prob, random_state, meta)`` from a state file written by :func:`sample`."""
+    """``(chain, log_prob, random_states, meta)`` from a state file written by :func:`sample`; one random
+    state per ensemble."""
     with np.load(path) as z:
-        rng = _rng_from_json(json.loads(z["rng"].tobytes().decode()))
+        saved = json.loads(z["rng"].tobytes().decode())
+        if saved and isinstance(saved[0], str):  # a state file of one ensemble
+            saved = [saved]
         meta = json.loads(z["meta"].tobytes().decode())
-        return z["chain"], z["log_prob"], rng, meta
+        return z["chain"], z["log_prob"], [_rng_from_json(r) for r in saved], meta
 
 
 def walker_count(n_walkers: int | None, ndim: int) -> int:
-    """``n_walkers``, or by default ``max(32, 2 ndim + 2)``, rounded up to even (emcee's red-blue halves).
-    With 50 autocorrelation times required, 32 walkers already give an ESS near 1600; more walkers only cost
-    more per step."""
+    """Walkers per ensemble: ``n_walkers``, or by default ``max(32, 2 ndim + 2)``, rounded up to even (emcee's
+    red-blue halves). With 50 autocorrelation times required, 32 walkers already give an ESS near 1600 per
+    ensemble; more walkers only cost more per step."""
     n = n_walkers or max(32, 2 * ndim + 2)
     return n + n % 2
+
+
+def _ensemble_seed(seed: int, ensemble: int) -> int:
+    """The seed of ensemble ``ensemble``'s RandomState (``seed`` itself for the first)."""
+    if ensemble == 0:
+        return seed
+    return int(np.random.SeedSequence([seed, ensemble]).generate_state(1)[0])
 
 
 def sample(
@@ -288,6 +341,7 @@ def sample(
     covariance: np.ndarray,
     *,
     n_walkers: int | None = None,
+    n_ensembles: int = DEFAULT_ENSEMBLES,
     seed: int = 0,
     chunk: int = DEFAULT_CHUNK,
     max_steps: int = DEFAULT_MAX_STEPS,
@@ -297,28 +351,45 @@ def sample(
     progress: bool = True,
     log=print,
 ) -> SampleResult:
-    """Run emcee on ``posterior`` from N(``centre``, ``covariance``) in theta space: ``warmup`` steps of
-    warm-up, then chunks of ``chunk`` steps until converged or ``max_steps`` in all (see the module
-    docstring). ``n_walkers``: see :func:`walker_count`. ``log(message)`` reports each round and chunk."""
+    """Run ``n_ensembles`` independent emcee ensembles of ``n_walkers`` walkers on ``posterior``, each started
+    from its own draws of N(``centre``, :data:`START_INFLATION`^2 ``covariance``) in theta space (overdispersed,
+    so that R-hat can reveal an ensemble stuck in its start): ``warmup`` steps of warm-up, then chunks of
+    ``chunk`` steps until converged (:func:`convergence`) or ``max_steps`` in all (see the module docstring).
+    ``n_walkers``: see :func:`walker_count`. ``log(message)`` reports each round and chunk."""
     start_time = time.perf_counter()
     ndim = posterior.ndim
-    n_walkers = walker_count(n_walkers, ndim)
+    per = walker_count(n_walkers, ndim)
+    n_ensembles = max(1, int(n_ensembles))
+    total = per * n_ensembles
     warmup = max(0, int(warmup))
     state_path = Path(state_path) if state_path is not None else None
-    meta = {"names": list(posterior.names), "n_walkers": n_walkers, "seed": seed, "warmup": warmup}
-    chain, lps = np.zeros((0, n_walkers, ndim)), np.zeros((0, n_walkers))
+    meta = {
+        "names": list(posterior.names),
+        "n_walkers": per,
+        "n_ensembles": n_ensembles,
+        "seed": seed,
+        "warmup": warmup,
+    }
+    chain, lps = np.zeros((0, total, ndim)), np.zeros((0, total))
     if resume and state_path is not None and state_path.exists():
-        chain, lps, rng_state, saved = load_state(state_path)
+        chain, lps, rng_states, saved = load_state(state_path)
+        saved.setdefault("n_ensembles", 1)
         if any(saved.get(k) != v for k, v in meta.items()):
             raise PeanoBayesInputError(
-                f"{state_path}: saved state is of another run (names, walkers, seed or warm-up differ); "
+                f"{state_path}: saved state is of another run (names, walkers, ensembles, seed or warm-up differ); "
                 "delete it or run without --resume"
             )
-        state = emcee.State(chain[-1], log_prob=lps[-1], random_state=rng_state)
+        states = [
+            emcee.State(chain[-1, e * per : (e + 1) * per], log_prob=lps[-1, e * per : (e + 1) * per], random_state=r)
+            for e, r in enumerate(rng_states)
+        ]
         log(f"resumed from {state_path} at step {chain.shape[0]}")
     else:
-        walkers, lp0 = initial_walkers(posterior, centre, covariance, n_walkers, seed)
-        state = emcee.State(walkers, log_prob=lp0, random_state=np.random.RandomState(seed).get_state())
+        states = []
+        for e in range(n_ensembles):
+            walkers, lp0 = initial_walkers(posterior, centre, START_INFLATION**2 * covariance, per, seed, e)
+            random_state = np.random.RandomState(_ensemble_seed(seed, e)).get_state()
+            states.append(emcee.State(walkers, log_prob=lp0, random_state=random_state))
     resumed_from = chain.shape[0]
     accepted = 0.0
     chunks = []
@@ -328,45 +399,53 @@ def sample(
         done = chain.shape[0]
         in_warmup = done < warmup
         n = min(next(b for b in bounds if b > done) - done if in_warmup else chunk, max_steps - done)
-        proposal = proposal_at(chain, done, warmup)
-        sampler = emcee.EnsembleSampler(n_walkers, ndim, posterior.batched, vectorize=True, moves=moves_for(proposal))
         t0 = time.perf_counter()
         label = "warm-up" if in_warmup else "steps"
-        try:
-            state = sampler.run_mcmc(
-                state, n, progress=progress, progress_kwargs={"desc": f"{label} {done}-{done + n}"}
+        parts, part_lps, acceptance, random_states = [], [], [], []
+        for e in range(n_ensembles):
+            own = chain[:, e * per : (e + 1) * per]
+            sampler = emcee.EnsembleSampler(
+                per, ndim, posterior.batched, vectorize=True, moves=moves_for(proposal_at(own, done, warmup))
             )
-        except ValueError as err:  # emcee refuses walkers that span fewer than ndim dimensions
-            if "condition number" not in str(err):
-                raise
-            raise PeanoBayesError(
-                f"the {n_walkers} walkers collapsed onto fewer than {ndim} dimensions at step {done}: the data do not "
-                f"determine all {ndim} sampled parameters ({', '.join(posterior.names)}); fit more tests or runs, "
-                "or narrow the prior"
-            ) from None
-        chain = np.concatenate([chain, sampler.get_chain()])
-        lps = np.concatenate([lps, sampler.get_log_prob()])
-        accepted = float(np.mean(sampler.acceptance_fraction))
+            desc = f"{label} {done}-{done + n}" + (f", ensemble {e + 1}/{n_ensembles}" if n_ensembles > 1 else "")
+            try:
+                states[e] = sampler.run_mcmc(states[e], n, progress=progress, progress_kwargs={"desc": desc})
+            except ValueError as err:  # emcee refuses walkers that span fewer than ndim dimensions
+                if "condition number" not in str(err):
+                    raise
+                raise PeanoBayesError(
+                    f"the {per} walkers of ensemble {e + 1} collapsed onto fewer than {ndim} dimensions at step "
+                    f"{done}: the data do not determine all {ndim} sampled parameters "
+                    f"({', '.join(posterior.names)}); fit more tests or runs, or narrow the prior"
+                ) from None
+            parts.append(sampler.get_chain())
+            part_lps.append(sampler.get_log_prob())
+            acceptance.append(sampler.acceptance_fraction)
+            random_states.append(sampler.random_state)
+        chain = np.concatenate([chain, np.concatenate(parts, axis=1)])
+        lps = np.concatenate([lps, np.concatenate(part_lps, axis=1)])
+        accepted = float(np.mean(np.concatenate(acceptance)))
         if state_path is not None:
-            _save_state(state_path, chain, lps, sampler.random_state, meta)
+            _save_state(state_path, chain, lps, random_states, meta)
         chunks.append(
             {"steps": chain.shape[0], "seconds": time.perf_counter() - t0, "acceptance": accepted, "warmup": in_warmup}
         )
         if in_warmup:
             log(f"warm-up step {chain.shape[0]} of {warmup}: acceptance {accepted:.2f}")
             continue
-        result = convergence(chain, posterior.names, start=warmup)
+        result = convergence(chain, posterior.names, start=warmup, n_ensembles=n_ensembles)
         log(
             f"step {chain.shape[0]}: acceptance {accepted:.2f}, tau_max {np.max(result.tau):.1f}, "
-            f"{result.tau_lengths:.0f} tau long, max R-hat {np.max(result.rhat):.3f}, "
-            f"min bulk ESS {np.min(result.ess_bulk):.0f}" + ("" if result.converged else " (not yet converged)")
+            f"{result.tau_lengths:.0f} tau long, max R-hat {np.max(result.rhat):.3f} ({n_ensembles} ensembles), "
+            f"min bulk ESS {np.min(result.ess_bulk):.0f}, min tail ESS {np.min(result.ess_tail):.0f}"
+            + ("" if result.converged else " (not yet converged)")
         )
         if result.converged:
             break
     if result is None and chain.shape[0] > warmup:  # resumed at or past the limit: the saved chain as it is
-        result = convergence(chain, posterior.names, start=warmup)
+        result = convergence(chain, posterior.names, start=warmup, n_ensembles=n_ensembles)
     if result is None:  # the step limit came inside the warm-up: figures of its second half, never converged
-        result = convergence(chain, posterior.names, start=len(chain) // 2)
+        result = convergence(chain, posterior.names, start=len(chain) // 2, n_ensembles=n_ensembles)
         problems = (f"the step limit ({max_steps}) ended the run inside the warm-up ({warmup} steps)",)
         result = dataclasses.replace(result, converged=False, problems=problems + result.problems)
     return SampleResult(
@@ -378,13 +457,16 @@ def sample(
         accepted,
         resumed_from,
         chunks,
+        n_ensembles,
     )
 
 
 __all__ = [
     "ADAPTED_MOVES",
     "DEFAULT_MAX_STEPS",
+    "MIN_ENSEMBLES",
     "MOVES",
+    "START_INFLATION",
     "WARMUP_ROUNDS",
     "IndependenceProposal",
     "TARGETS",
@@ -394,6 +476,7 @@ __all__ = [
     "initial_walkers",
     "load_state",
     "moves_for",
+    "pooled",
     "proposal_at",
     "sample",
     "walker_count",

@@ -91,7 +91,7 @@ def run_replicate(
     index: int,
     *,
     seed: int = 0,
-    n_walkers: int = 16,
+    n_walkers: int = 8,
     warmup: int = 200,
     chunk: int = 250,
     max_steps: int = 4000,

@@ -1,0 +1,54 @@
+"""The main job's plumbing: the run log and the results page's parameter table (population, new specimen,
+posterior contraction)."""
+
+import pickle
+
+from peano_bayes.pipeline import RunLog, index_markdown
+
+
+def test_run_log_prints_and_appends_timestamped_lines_and_pickles(tmp_path):
+    seen = []
+    log = RunLog(tmp_path / "run.log", seen.append)
+    log("TP: least squares ...")
+    again = pickle.loads(pickle.dumps(RunLog(tmp_path / "run.log")))  # what a worker process receives
+    again.echo = None
+    again("P: sampling")
+    lines = (tmp_path / "run.log").read_text().splitlines()
+    assert seen == ["TP: least squares ..."]
+    assert [line.split(" ", 1)[1] for line in lines] == ["TP: least squares ...", "P: sampling"]
+    assert all(line[:4].isdigit() and line[19] == "Z" for line in lines)
+
+
+def _summary(contraction):
+    row = {"mean": 500.0, "sd": 10.0, "hdi_low": 480.0, "hdi_high": 520.0}
+    spread = {"mean": 0.05, "sd": 0.02, "hdi_low": 0.01, "hdi_high": 0.09}
+    names = ("tensile_ka_n_per_m", "specimen_log_sd")
+    return {
+        "material": "TP",
+        "dataset": "TP.csv",
+        "tests": ["load_cycle"],
+        "n_walkers": 32,
+        "n_ensembles": 4,
+        "steps": 2000,
+        "convergence": {
+            "converged": True,
+            "problems": [],
+            "rhat": dict.fromkeys(names, 1.002),
+            "ess_bulk": dict.fromkeys(names, 3000.0),
+            "tau_lengths": 60.0,
+        },
+        "parameters": {"tensile_ka_n_per_m": row, "specimen_log_sd": spread},
+        "new_specimen": {"tensile_ka_n_per_m": {**row, "hdi_low": 450.0, "hdi_high": 560.0}},
+        "contraction": {"tensile_ka_n_per_m": 0.99, "specimen_log_sd": contraction},
+        "units": {"tensile_ka_n_per_m": "N/m", "specimen_log_sd": "-"},
+        "fit_quality_posterior_mean": {},
+        "timings_s": {"least_squares_s": 1.0, "compile_s": 1.0, "sampling_s": 1.0},
+    }
+
+
+def test_results_page_shows_population_new_specimen_and_weakly_informed_parameters():
+    page = index_markdown([_summary(0.2)])
+    assert "4 ensembles of 32 walkers x 2000 steps" in page
+    assert "| tensile_ka_n_per_m | N/m | 500 | 480 to 520 | 450 to 560 | 0.99 | 1.002 | 3000 |" in page
+    assert "**Posterior close to its prior** (contraction below 0.5): specimen_log_sd." in page
+    assert "close to its prior" not in index_markdown([_summary(0.8)])
