@@ -178,14 +178,22 @@ def ordering_checks(draws: dict) -> list[dict]:
 def rank_materials(draws: dict, from_prior=()) -> dict:
     """Everything :mod:`peano_bayes.ranking` computes, as plain data: ``materials``; ``criteria`` (per
     criterion: ``p_best``, ``mean_rank``, ``rank_interval`` by material, ``p_better`` matrix rows by material,
-    ``n`` draws, ``from_prior``; criteria no draw defines are left out); ``pareto`` (P(Pareto-optimal) by
-    material); ``orderings`` (:func:`ordering_checks`). ``draws``: code -> metric -> (n,) values;
-    ``from_prior``: metrics the data did not inform in some material (flagged, e.g. step metrics of fits
-    without the step test)."""
+    the margin probabilities, ``n`` draws; criteria no draw defines are left out); ``pareto`` (P(Pareto-optimal)
+    by material, over the Pareto criteria that are ranked); ``orderings`` (:func:`ordering_checks`);
+    ``left_out`` (criterion -> why it is not ranked). ``draws``: code -> metric -> (n,) values; ``from_prior``:
+    metrics the data did not inform in some material (e.g. the step metrics of fits without the step test):
+    they are **not ranked**, since their draws are the prior's and a ranking of them would rank the priors."""
     materials = tuple(draws)
     from_prior = set(from_prior)
     criteria = {}
+    left_out = {
+        c: "not informed by the fitted tests (the step response was not fitted): its draws are the prior's"
+        for c in CRITERIA
+        if c in from_prior
+    }
     for criterion in CRITERIA:
+        if criterion in left_out:
+            continue
         try:
             r = rank_criterion(draws, criterion, materials)
         except ValueError:
@@ -203,12 +211,23 @@ def rank_materials(draws: dict, from_prior=()) -> dict:
             "n": r.n,
             "from_prior": criterion in from_prior,
         }
+    pareto_criteria = tuple(c for c in PARETO_CRITERIA if c not in left_out)
     try:
-        pareto = pareto_probability(draws, materials)
-    except (ValueError, IndexError):
+        pareto = pareto_probability(draws, materials, pareto_criteria)
+    except (ValueError, IndexError, KeyError):
         pareto = {}
-    orderings = [{**o, "from_prior": o["metric"] in from_prior} for o in ordering_checks(draws)]
-    return {"materials": list(materials), "criteria": criteria, "pareto": pareto, "orderings": orderings}
+    orderings = [
+        {**o, "from_prior": True, "verdict": "not informed"} if o["metric"] in from_prior else {**o, "from_prior": False}
+        for o in ordering_checks(draws)
+    ]
+    return {
+        "materials": list(materials),
+        "criteria": criteria,
+        "pareto": pareto,
+        "pareto_criteria": list(pareto_criteria),
+        "orderings": orderings,
+        "left_out": left_out,
+    }
 
 
 def ranking_markdown(report: dict) -> str:
@@ -236,8 +255,11 @@ def ranking_markdown(report: dict) -> str:
                 extra = f" / {r['p_clearly_best'][c]:.2f} / {r['p_near_best'][c]:.2f}"
             cells.append(f"{r['p_best'][c]:.2f}{extra}, rank {r['mean_rank'][c]:.1f} ({low}-{high})")
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    for criterion, why in report.get("left_out", {}).items():
+        lines += ["", f"Not ranked: {criterion}, {why}."]
     if report["pareto"]:
-        lines += ["", f"### P(Pareto-optimal) over {', '.join(PARETO_CRITERIA)}", ""]
+        over = report.get("pareto_criteria", PARETO_CRITERIA)
+        lines += ["", f"### P(Pareto-optimal) over {', '.join(over)}", ""]
         lines.append("| " + " | ".join(materials) + " |")
         lines.append("|" + "---|" * len(materials))
         lines.append("| " + " | ".join(f"{report['pareto'][c]:.2f}" for c in materials) + " |")

@@ -42,6 +42,16 @@ def test_margin_probabilities_match_the_normal_theory(rng):
     assert rank_criterion(wide, "hysteresis_loss").p_clearly_best[0] == 1.0
 
 
+def test_criteria_the_data_did_not_inform_are_not_ranked(rng):
+    draws = _draws(rng, {"TP": 1.0, "P": 2.0})
+    report = rank_materials(draws, from_prior={"speed", "efficiency", "power_per_pressure"})
+    assert not {"speed", "efficiency", "power_per_pressure"} & set(report["criteria"])
+    assert set(report["left_out"]) == {"speed", "efficiency", "power_per_pressure"}
+    assert "speed" not in report["pareto_criteria"] and report["pareto"]
+    speed = [o for o in report["orderings"] if o["metric"] == "speed"]
+    assert speed and all(o["verdict"] == "not informed" for o in speed)
+
+
 def test_identical_materials_share_first_place(rng):
     draws = _draws(rng, {"A": 1.0, "C": 0.5}, n=200)
     draws["B"] = {c: v.copy() for c, v in draws["A"].items()}
