@@ -20,9 +20,9 @@ and repeats. Interpretation choices, stated once:
 
 **Predicted** (:func:`model_metrics`, :func:`posterior_metrics`): the same definitions on noise-free virtual-rig
 signals of one specimen (:func:`peano_bayes.rig.simulate_dataset`, the paper's protocol for the material), one
-simulation per parameter draw (by default a new specimen's, see :func:`posterior_metrics`); the stiffness from a dedicated 0 kPa stretch from 0 to -3 % strain
-(:func:`zero_kpa_stiffness`), because the rig's 0 kPa cycle starts at the start tension, which stretches soft
-muscles past -1.5 %.
+simulation per parameter draw (by default a new specimen's, see :func:`posterior_metrics`); the stiffness from a
+dedicated 0 kPa stretch from 0 to -3 % strain (:func:`zero_kpa_stiffness`), because the rig's 0 kPa cycle starts at
+the start tension, which stretches soft muscles past -1.5 %.
 """
 
 from __future__ import annotations

@@ -217,7 +217,9 @@ def rank_materials(draws: dict, from_prior=()) -> dict:
     except (ValueError, IndexError, KeyError):
         pareto = {}
     orderings = [
-        {**o, "from_prior": True, "verdict": "not informed"} if o["metric"] in from_prior else {**o, "from_prior": False}
+        {**o, "from_prior": True, "verdict": "not informed"}
+        if o["metric"] in from_prior
+        else {**o, "from_prior": False}
         for o in ordering_checks(draws)
     ]
     return {
