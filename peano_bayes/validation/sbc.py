@@ -114,7 +114,10 @@ def run_replicate(
             redraws += 1
             if redraws > 20:
                 raise
-    posterior = base.with_observations(prepare(data))
+    try:  # same protocol: reuse the compiled log posterior
+        posterior = base.with_observations(prepare(data))
+    except ValueError:  # the replicate's inputs were cut into other segments (other bin shapes): its own
+        posterior = replace(base, observations=prepare(data))
     start = np.asarray(prior.median_unconstrained())
     spread = np.std(prior.sample(np.random.default_rng(0), 2000), axis=0)
     laplace = posterior_mode(posterior, start, np.diag(spread**2))
