@@ -188,6 +188,7 @@ def infer(
     out.mkdir(parents=True, exist_ok=True)
     observations = prepare(dataset)
     posterior = build_posterior(observations, prior, config=config, held=() if sample_all else DEFAULT_HELD)
+    n_walkers = walker_count(n_walkers, posterior.ndim)  # refuse too few walkers before anything is computed
     log(
         f"{code}: {observations.n_bins} bins from {len(dataset.runs)} runs ({', '.join(dataset.tests)}); "
         f"{posterior.ndim} parameters sampled"

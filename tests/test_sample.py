@@ -21,6 +21,7 @@ from peano_bayes.inference.sample import (
     pooled,
     proposal_at,
     sample,
+    walker_count,
     warmup_rounds,
 )
 
@@ -154,6 +155,12 @@ def test_resume_refuses_a_state_of_another_run(tmp_path):
     sample(g, g.mean, 0.05 * np.eye(3), seed=1, max_steps=20, **kw)
     with pytest.raises(PeanoBayesInputError, match="another run"):
         sample(g, g.mean, 0.05 * np.eye(3), seed=2, max_steps=40, resume=True, **kw)
+
+
+def test_too_few_walkers_for_the_dimension_is_an_input_error():
+    assert walker_count(None, 20) == 42 and walker_count(None, 3) == 32 and walker_count(9, 4) == 10
+    with pytest.raises(PeanoBayesInputError, match="fewer than twice the 14 sampled parameters"):
+        walker_count(24, 14)
 
 
 def test_pooled_lays_each_ensembles_walkers_end_to_end():

@@ -325,6 +325,11 @@ def walker_count(n_walkers: int | None, ndim: int) -> int:
     red-blue halves). With 50 autocorrelation times required, 32 walkers already give an ESS near 1600 per
     ensemble; more walkers only cost more per step."""
     n = n_walkers or max(32, 2 * ndim + 2)
+    if n < 2 * ndim:
+        raise PeanoBayesInputError(
+            f"{n} walkers per ensemble are fewer than twice the {ndim} sampled parameters; emcee's moves need at "
+            f"least {2 * ndim} (omit --walkers for the default, max(32, 2 x parameters + 2))"
+        )
     return n + n % 2
 
 
