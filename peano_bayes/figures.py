@@ -45,8 +45,13 @@ def save(fig, path_stem: Path) -> list[Path]:
 
 
 def physical_names(idata) -> list[str]:
-    """The sampled physical parameters of a result (no noise scales, no specimen terms)."""
-    return [n for n in idata.posterior.data_vars if n not in NOISE_PARAMETERS and not n.startswith("specimen_")]
+    """The sampled physical parameters of a result, population values (no noise scales, no specimen terms, no
+    specimen-level or new-specimen variables)."""
+    return [
+        n
+        for n in idata.posterior.data_vars
+        if n not in NOISE_PARAMETERS and not n.startswith(("specimen_", "new_specimen_"))
+    ]
 
 
 def predictive_runs(idata) -> list[dict]:
@@ -182,7 +187,7 @@ def material_figures(result_dir: str | Path, dataset=None) -> list[Path]:
             ax.tick_params(axis="x", labelrotation=35)  # long labels ("2.2e+06") of neighbours would overlap
             ax.xaxis.label.set_fontsize(8)
             ax.yaxis.label.set_fontsize(8)
-        for i in range(len(names)):  # diagonal panels are marginal densities: their y scale is not the row's
+        for i in range(min(len(names), len(axes))):  # diagonal panels are marginal densities, not the row's y
             axes[i][i].set_ylabel("")
             axes[i][i].tick_params(axis="y", labelleft=False)
         fig = np.ravel(axes)[0].figure

@@ -137,3 +137,25 @@ def test_step_band_brackets_its_median_and_draws_a_figure(result_dir, tmp_path):
     assert band["observed"][-20:].mean() > band["observed"][:5].mean() + 0.01
     assert band["median"][-20:].mean() > band["median"][:5].mean() + 0.01
     assert step_band(load_result(result_dir), dataclasses.replace(dataset, runs=())) is None
+
+
+def test_corner_plot_takes_population_values_not_specimen_levels():
+    """A two-specimen result holds specimen__ and new_specimen__ variables beside the population values; the
+    corner plot shows the population values only (with them a 7-parameter fit asked arviz for 14 panels and
+    the plot failed)."""
+    import arviz as az
+
+    from peano_bayes.figures import physical_names
+
+    draws = np.zeros((2, 5))
+    idata = az.from_dict(
+        posterior={
+            "tensile_ka_n_per_m": draws,
+            "specimen__tensile_ka_n_per_m": np.zeros((2, 5, 2)),
+            "new_specimen__tensile_ka_n_per_m": draws,
+            "specimen_log_sd": draws,
+            "specimen_contrast_tensile_ka_n_per_m_1": draws,
+            "noise_load_cycle_force_n": draws,
+        }
+    )
+    assert physical_names(idata) == ["tensile_ka_n_per_m"]
