@@ -213,7 +213,6 @@ def infer(
         )
 
     centre, covariance = walker_start(posterior, fitted)
-    n_walkers = walker_count(n_walkers, posterior.ndim)
     laplace = None
     if not (resume and state_path.exists()):  # a resumed run restores its walkers and needs no start
         log(f"{code}: posterior mode (BFGS) from the least-squares point ...")

@@ -234,15 +234,21 @@ def segment_starts(inputs: list[np.ndarray]) -> np.ndarray:
     return np.array(sorted(cuts))
 
 
-def segment_bins(starts: np.ndarray, n: int, per_segment: int) -> np.ndarray:
-    """Start indices of the bins: each segment (``starts``, (s,), of ``n`` samples) cut into ``per_segment``
-    bins of nearly equal sample count (fewer when the segment is shorter). Consecutive segment starts one
-    sample apart (a kink the fit spread over two samples) are merged first."""
+def merge_adjacent(starts: np.ndarray) -> np.ndarray:
+    """Segment ``starts`` (increasing, first 0) with each start one sample after the previous kept one dropped
+    (a kink the piecewise-linear fit spread over two samples is one boundary)."""
     kept = [int(starts[0])]
     for a in starts[1:]:
         if a - kept[-1] > 1:
             kept.append(int(a))
-    edges = kept + [n]
+    return np.array(kept)
+
+
+def segment_bins(starts: np.ndarray, n: int, per_segment: int) -> np.ndarray:
+    """Start indices of the bins: each segment (``starts``, (s,), of ``n`` samples) cut into ``per_segment``
+    bins of nearly equal sample count (fewer when the segment is shorter); starts are merged first
+    (:func:`merge_adjacent`)."""
+    edges = merge_adjacent(starts).tolist() + [n]
     out = []
     for a, b in zip(edges[:-1], edges[1:], strict=True):
         m = min(per_segment, b - a)
@@ -328,7 +334,7 @@ def _reduce_run(
         ]
         n = run.time_s.shape[0]
         known = [] if known_segments is None else known_segments
-        segments = _snap(segment_bins(segment_starts(smooth), n, 1), known, n)
+        segments = _snap(merge_adjacent(segment_starts(smooth)), known, n)
         k = segment_bins(segments, n, per_segment)
     one_per_bin = np.ndim(k) == 0 and k == 1
     centre, _ = bin_means(run.time_s, k)
