@@ -185,10 +185,10 @@ def infer(
     prior = _prior_of(dataset, prior)
     config = prior.config
     out = Path(out_dir) / _check_label(_default_label(dataset) if label is None else label)
-    out.mkdir(parents=True, exist_ok=True)
     observations = prepare(dataset)
     posterior = build_posterior(observations, prior, config=config, held=() if sample_all else DEFAULT_HELD)
-    n_walkers = walker_count(n_walkers, posterior.ndim)  # refuse too few walkers before anything is computed
+    n_walkers = walker_count(n_walkers, posterior.ndim)  # refuse too few walkers before anything is written
+    out.mkdir(parents=True, exist_ok=True)
     log(
         f"{code}: {observations.n_bins} bins from {len(dataset.runs)} runs ({', '.join(dataset.tests)}); "
         f"{posterior.ndim} parameters sampled"

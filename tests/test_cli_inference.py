@@ -11,6 +11,7 @@ from peano_bayes.cli import main
         (["fit", "no/such/file.csv", "--out", "{out}"], "no/such/file"),
         (["fit", "tests/malformed/valid.csv", "--out", "{out}", "--chunk", "0"], "--chunk must be >= 1"),
         (["fit", "tests/malformed/valid.csv", "--out", "{out}", "--walkers", "2"], "--walkers must be >= 4"),
+        (["fit", "tests/malformed/valid.csv", "--out", "{out}", "--walkers", "4"], "fewer than twice the"),
         (["run", "--out", "{out}", "--materials", "XX"], "unknown material(s) XX"),
         (["run", "--out", "{out}", "--jobs", "0"], "--jobs must be >= 1"),
     ],
