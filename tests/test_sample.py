@@ -91,6 +91,27 @@ def test_proposal_log_density_matches_its_own_draws():
     np.testing.assert_allclose(factor, proposal.log_density(np.zeros((4000, 2))) - proposal.log_density(new))
 
 
+def test_proposal_log_density_is_scipys_multivariate_t():
+    from scipy import stats
+
+    cov = np.array([[1.0, 0.3, 0.1], [0.3, 0.5, -0.2], [0.1, -0.2, 2.0]])
+    proposal = IndependenceProposal(np.array([1.0, 2.0, -1.0]), cov, df=5.0)
+    x = np.random.default_rng(3).normal(size=(50, 3)) * 3
+    np.testing.assert_allclose(
+        proposal.log_density(x), stats.multivariate_t(proposal.mean, cov, df=5.0).logpdf(x), rtol=1e-12
+    )
+
+
+def test_proposal_from_stuck_walkers_is_still_usable():
+    """A short warm-up where walkers never moved: 12 draws of 9 parameters, all on two points (rank 1). The
+    fitted proposal must still draw and evaluate finite densities (CI's wheel smoke failed here)."""
+    rng = np.random.default_rng(0)
+    two = rng.normal(size=(2, 9))
+    proposal = IndependenceProposal.fit(np.repeat(two, 6, axis=0))
+    new, factor = proposal(np.repeat(two, 2, axis=0), np.random.RandomState(1))
+    assert np.all(np.isfinite(new)) and np.all(np.isfinite(factor))
+
+
 def test_warmup_rounds_and_the_proposal_in_force():
     assert warmup_rounds(0) == [0]
     assert warmup_rounds(300) == [0, 100, 200, 300]

@@ -47,7 +47,7 @@ from pathlib import Path
 import arviz as az
 import emcee
 import numpy as np
-from scipy import stats
+from scipy import special
 
 from ..atomic import write_bytes
 from ..defaults import DEFAULT_CHUNK, DEFAULT_ENSEMBLES, DEFAULT_MAX_STEPS, DEFAULT_WARMUP
@@ -69,6 +69,8 @@ MOVES = ((emcee.moves.DEMove, 0.8), (emcee.moves.DESnookerMove, 0.2))
 #: ESS 250; these weights 32, 1.052, 527; independence at 0.6 tau 31 but R-hat 1.126, ESS 175 (walkers in the
 #: posterior's tails, where the ellipse under-covers, wait for DE moves to carry them back).
 ADAPTED_MOVES = (0.55, 0.15, 0.3)
+#: Smallest eigenvalue of a fitted proposal's scale matrix, relative to its largest.
+EIGENVALUE_FLOOR = 1e-8
 #: Warm-up rounds; the proposal is refitted after each.
 WARMUP_ROUNDS = 3
 
@@ -85,23 +87,33 @@ class IndependenceProposal:
 
     @classmethod
     def fit(cls, draws: np.ndarray, df: float = 5.0) -> IndependenceProposal:
-        """Fitted to ``draws`` (n, D): their mean and covariance (eigenvalues floored for a valid scale matrix)."""
+        """Fitted to ``draws`` (n, D): their mean and covariance, eigenvalues floored at
+        :data:`EIGENVALUE_FLOOR` times the largest. Few or stuck walkers (a short warm-up, a walker that never
+        moved) give a rank-deficient sample covariance; the floor keeps the scale matrix positive definite."""
         mean = draws.mean(axis=0)
         values, vectors = np.linalg.eigh(np.atleast_2d(np.cov(draws.T)))
-        values = np.maximum(values, 1e-12 * max(values.max(), 1e-300))
+        values = np.maximum(values, EIGENVALUE_FLOOR * max(values.max(), 1e-300))
         return cls(mean, (vectors * values) @ vectors.T, df)
 
     @cached_property
     def _cholesky(self) -> np.ndarray:
         return np.linalg.cholesky(self.covariance)
 
-    @cached_property
-    def _distribution(self):
-        return stats.multivariate_t(self.mean, self.covariance, df=self.df)
-
     def log_density(self, x: np.ndarray) -> np.ndarray:
-        """(n,) log density of the proposal at ``x`` (n, D)."""
-        return np.atleast_1d(self._distribution.logpdf(x))
+        """(n,) log density of the proposal at ``x`` (n, D): the multivariate t with location ``mean``, scale
+        matrix ``covariance`` and ``df`` degrees of freedom, through the Cholesky factor used to draw from it."""
+        x = np.atleast_2d(x)
+        d = self.mean.size
+        solved = np.linalg.solve(self._cholesky, (x - self.mean).T)
+        mahalanobis = np.sum(solved**2, axis=0)
+        half_log_det = np.sum(np.log(np.diag(self._cholesky)))
+        norm = (
+            special.gammaln((self.df + d) / 2)
+            - special.gammaln(self.df / 2)
+            - 0.5 * d * np.log(self.df * np.pi)
+            - half_log_det
+        )
+        return norm - 0.5 * (self.df + d) * np.log1p(mahalanobis / self.df)
 
     def __call__(self, coords: np.ndarray, random: np.random.RandomState):
         """emcee's proposal contract: new points (n, D) and log Hastings factors q(old) / q(new) (n,), drawn
