@@ -172,7 +172,11 @@ def hysteresis_data():
     return hidden_dataset(Case(("hysteresis",), 4.0), seed=100)
 
 
-def test_superset_at_off_equals_the_model_without_the_elements(hysteresis_data):
+# Its own work unit (the group name joins the module's, giving "discovery_nesting"): it compiles its own predict
+# programs (the superset and the truth configuration, load cycles and steps) and shares none of the superset fits'
+# compilations, so another worker can run it beside the discovery group (86 s alone on one core).
+@pytest.mark.xdist_group("nesting")
+def test_superset_at_off_equals_the_model_without_the_elements():
     """Nesting: every effect at its off value changes no prediction (the inlet's off value is its largest area,
     whose pressure drop is below the sensors' noise)."""
     split = discovery_data(hidden_dataset(Case(), seed=101))
