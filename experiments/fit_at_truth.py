@@ -4,8 +4,10 @@ simulation) is not the process that made the data, and the posterior moves away 
 
 Truth: every specimen's own generating values (the dataset's provenance) and the rig's noise scales. Posterior
 mean: each specimen's posterior mean (``specimen__<name>``) or the population mean of a shared parameter.
-Prints per test the log-likelihood and the rms of (observed - predicted) / bin sd, then, for the worst test at
-the truth, the mean and rms of those z per tenth of each run. The last line is one JSON object.
+Prints per test the log-likelihood, the rms of (observed - predicted) / bin sd and the rms of the residuals
+whitened by the likelihood's own covariance (which differ where the fitted inputs' error is integrated out,
+``likelihood.INPUT_ERROR_TESTS``: the second is the fit in noise units), then, for the worst test at the truth,
+the mean of the raw z per tenth of each run. The last line is one JSON object.
 
     python experiments/fit_at_truth.py CODE RESULT_DIR      (e.g. TP results/TP)
 """
@@ -22,7 +24,7 @@ import numpy as np
 
 from peano_bayes.bundled import dataset_path
 from peano_bayes.data import load
-from peano_bayes.inference.likelihood import group_log_likelihood, prepare
+from peano_bayes.inference.likelihood import group_log_likelihood, prepare, whitened_residuals
 from peano_bayes.inference.posterior import build_posterior
 from peano_bayes.inference.priors import prior_for
 from peano_bayes.inference.results import SPECIMEN_PREFIX
@@ -33,7 +35,13 @@ def per_test(params, observations, config) -> dict:
     for g in observations.groups:
         pred, scale, ll = group_log_likelihood(params, g, config=config, geometry=observations.geometry)
         z = (g.observed - np.asarray(pred)) / np.asarray(scale)
-        out[g.test] = {"log_likelihood": float(np.nansum(ll)), "z_rms": float(np.sqrt(np.nanmean(z**2))), "z": z}
+        white = whitened_residuals(params, g, config=config, geometry=observations.geometry)
+        out[g.test] = {
+            "log_likelihood": float(np.nansum(ll)),
+            "z_rms": float(np.sqrt(np.nanmean(z**2))),
+            "z_whitened_rms": float(np.sqrt(np.nanmean(white**2))),
+            "z": z,
+        }
     return out
 
 
@@ -68,7 +76,10 @@ def main() -> None:
     report = {}
     for label, params in (("truth", truth), ("posterior_mean", mean)):
         report[label] = per_test(params, observations, posterior.config)
-        cells = ", ".join(f"{t} ll {r['log_likelihood']:.1f} z_rms {r['z_rms']:.3f}" for t, r in report[label].items())
+        cells = ", ".join(
+            f"{t} ll {r['log_likelihood']:.1f} z_rms {r['z_rms']:.3f} whitened {r['z_whitened_rms']:.3f}"
+            for t, r in report[label].items()
+        )
         print(f"{label}: {cells}")
     worst = max(report["truth"], key=lambda t: report["truth"][t]["z_rms"])
     z = report["truth"][worst]["z"]

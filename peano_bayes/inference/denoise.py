@@ -55,11 +55,14 @@ class _SegmentCost:
         return line, constant
 
 
-def piecewise_linear_fit(time_s: np.ndarray, values: np.ndarray, sd: float | None = None) -> np.ndarray:
-    """Best piecewise-linear least-squares fit of ``values`` (n,) over ``time_s`` (n,), same shape.
+def piecewise_linear_segments(time_s: np.ndarray, values: np.ndarray, sd: float | None = None):
+    """The best piecewise-linear least-squares fit of ``values`` (n,) over ``time_s`` (n,) and its segments.
 
-    ``sd``: the noise sd (default: :func:`noise_sd`). NaN samples are left out of the fit and filled by
-    linear interpolation of the fit. Signals without noise (sd 0) are returned unchanged.
+    Returns ``(fitted (n,), segments)``: ``segments`` is a list of ``(start, stop, sloped)`` over the finite
+    samples (indices into ``time_s[isfinite(values)]``), in order; ``sloped`` False for a hold (a constant).
+    ``sd``: the noise sd (default: :func:`noise_sd`). NaN samples are left out of the fit and filled by linear
+    interpolation of the fit. Signals without noise (sd 0) or too short are returned unchanged, with no
+    segments.
     """
     time_s, values = np.asarray(time_s, dtype=float), np.asarray(values, dtype=float)
     ok = np.isfinite(values)
@@ -67,7 +70,7 @@ def piecewise_linear_fit(time_s: np.ndarray, values: np.ndarray, sd: float | Non
     n = t.size
     sd = noise_sd(x) if sd is None else float(sd)
     if n < 2 * MIN_SEGMENT or not sd > 0.0:
-        return values.copy()
+        return values.copy(), []
     cost = _SegmentCost(t, x)
     log_n = np.log(n)
     best = np.full(n + 1, np.inf)
@@ -82,17 +85,51 @@ def piecewise_linear_fit(time_s: np.ndarray, values: np.ndarray, sd: float | Non
         i = int(np.argmin(total))
         best[j], start[j], sloped[j] = total[i], i, line[i] < constant[i]
     fitted = np.empty(n)
+    segments = []
     j = n
     while j > 0:
         i = start[j]
         tt, xx = t[i:j], x[i:j]
-        if sloped[j] and np.ptp(tt) > 0:
+        slope_fitted = bool(sloped[j] and np.ptp(tt) > 0)
+        if slope_fitted:
             slope, intercept = np.polyfit(tt - tt.mean(), xx, 1)
             fitted[i:j] = intercept + slope * (tt - tt.mean())
         else:
             fitted[i:j] = xx.mean()
+        segments.append((int(i), int(j), slope_fitted))
         j = i
-    return np.interp(time_s, t, fitted)
+    return np.interp(time_s, t, fitted), segments[::-1]
 
 
-__all__ = ["MIN_SEGMENT", "noise_sd", "piecewise_linear_fit"]
+def piecewise_linear_fit(time_s: np.ndarray, values: np.ndarray, sd: float | None = None) -> np.ndarray:
+    """Best piecewise-linear least-squares fit of ``values`` (n,) over ``time_s`` (n,), same shape (see
+    :func:`piecewise_linear_segments`)."""
+    return piecewise_linear_segments(time_s, values, sd)[0]
+
+
+def fit_error_basis(time_s: np.ndarray, values: np.ndarray, segments, sd: float) -> np.ndarray:
+    """(n, q) matrix ``B`` whose columns span the error of the piecewise-linear fit: with white noise of sd
+    ``sd`` in ``values``, the fitted signal minus the noise-free one (given the segmentation) is ``B a``,
+    ``a ~ N(0, I_q)``. Per segment, ``sd`` times an orthonormal basis of what the segment's fit can do over its
+    samples (the constant, and the centred time of a sloped segment), so ``q`` = 2 per ramp + 1 per hold. Rows
+    of NaN samples are interpolated, like the fit."""
+    time_s, values = np.asarray(time_s, dtype=float), np.asarray(values, dtype=float)
+    ok = np.isfinite(values)
+    t = time_s[ok]
+    columns = []
+    for i, j, sloped in segments:
+        column = np.zeros(t.size)
+        column[i:j] = 1.0 / np.sqrt(j - i)
+        columns.append(column)
+        if sloped:
+            centred = t[i:j] - t[i:j].mean()
+            column = np.zeros(t.size)
+            column[i:j] = centred / np.sqrt(np.sum(centred**2))
+            columns.append(column)
+    if not columns:
+        return np.zeros((time_s.size, 0))
+    basis = sd * np.stack(columns, axis=1)
+    return np.stack([np.interp(time_s, t, c) for c in basis.T], axis=1)
+
+
+__all__ = ["MIN_SEGMENT", "fit_error_basis", "noise_sd", "piecewise_linear_fit", "piecewise_linear_segments"]

@@ -25,6 +25,15 @@ sd, on virtual-rig data.) The step response is not binned by default (its dynami
 :mod:`~peano_bayes.inference.denoise`). Raw, their sensor noise is amplified by the model's sensitivity: on the
 bundled TP data at the true parameters, stroke and step residuals are 14 and 21 times the strain noise, and
 1.0 times with the fitted inputs.
+
+**The fitted inputs' own error** (tests in :data:`INPUT_ERROR_TESTS`): the fit of a ramp from noisy samples is
+itself off by a random offset and slope, and the runs that share a simulation share that error, so it shows as
+one smooth residual common to all repeats, which a likelihood of independent bins reads as signal. Given the
+fit's segments, that error is ``B a`` with ``a ~ N(0, I)`` (:func:`~peano_bayes.inference.denoise.fit_error_basis`;
+for repeats averaged, the exact low-rank factor of their mean's covariance). Linearised through the simulation
+(``J = d prediction / d a``, one forward-mode derivative per column), it adds ``J J^T`` to the covariance of the
+bins of every run sharing the simulation; :func:`group_log_likelihood` integrates ``a`` out exactly (Woodbury
+identity, a q x q solve per simulated input, q = 2 per ramp).
 """
 
 from __future__ import annotations
@@ -32,6 +41,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from types import MappingProxyType
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -51,7 +61,7 @@ from ..physics import (
     simulate_step,
     simulate_stroke,
 )
-from .denoise import noise_sd, piecewise_linear_fit
+from .denoise import fit_error_basis, noise_sd, piecewise_linear_segments
 
 #: Samples averaged per bin, by test, when binning by a fixed count (``prepare(..., bin_sizes=...)``).
 DEFAULT_BIN_SIZES = MappingProxyType({"load_cycle": 4, "blocking": 4, "stroke": 4, "step": 1})
@@ -83,6 +93,16 @@ DRIVING_INPUTS = MappingProxyType(
         "step": ("supply_pa",),
     }
 )
+#: Tests whose fitted driving inputs' error enters the likelihood (see the module docstring). Measured on the
+#: bundled TP data at the true parameters with the inputs treated as exact: the rms of the stroke test's bin
+#: residuals over their noise sd is 1.78 (the fitted pressure ramp's offset and slope error, about 30 Pa in 30
+#: kPa, moves a strain whose noise is 2e-4 by up to 3 bin sd); load cycle 1.02 and blocking 1.04 (forces whose
+#: noise dwarfs that effect), so they are left out: each column of the error costs a forward-mode derivative.
+INPUT_ERROR_TESTS = frozenset({"stroke"})
+#: Driving inputs whose fit error can be modelled (the step's supply pressure is not).
+ERROR_INPUTS = ("strain", "pressure_pa")
+#: Relative size below which an eigenvalue of a fitted input's error covariance is dropped (exact rank).
+_ERROR_RANK_TOLERANCE = 1e-10
 #: Integration substeps per (binned) sample interval of the step test.
 STEP_SUBSTEPS = 2
 #: Largest solver equilibrium error (``max_residual`` of a simulation) accepted, by test: [m] where strain is
@@ -113,7 +133,9 @@ class RunGroup:
     each run (repeats of one protocol share one). Per simulated row: ``specimen_index`` (u,) int into
     :attr:`Observations.specimens`; ``time_s``, ``strain``, ``pressure_pa``, ``supply_pa`` (u, p m) the
     simulation's times and inputs, ``p`` = :attr:`points_per_bin` per bin (``supply_pa`` only for steps);
-    ``bin_time_s`` (u, m) mean time of each bin; ``load_n`` (u,) hanging or inertial load [N].
+    ``bin_time_s`` (u, m) mean time of each bin; ``load_n`` (u,) hanging or inertial load [N];
+    ``strain_error``, ``pressure_error`` (u, q, p m) or ``None``: the columns of the fitted inputs' error at
+    the simulation's times (``a ~ N(0, I_q)``, zero columns pad sets with fewer; see the module docstring).
     """
 
     test: str
@@ -128,6 +150,13 @@ class RunGroup:
     counts: np.ndarray
     shared: np.ndarray
     bin_time_s: np.ndarray
+    strain_error: np.ndarray | None = None
+    pressure_error: np.ndarray | None = None
+
+    @property
+    def has_input_error(self) -> bool:
+        """Whether the fitted inputs' error enters this group's likelihood."""
+        return self.pressure_error is not None
 
     @property
     def points_per_bin(self) -> int:
@@ -160,6 +189,8 @@ jax.tree_util.register_dataclass(
         "counts",
         "shared",
         "bin_time_s",
+        "strain_error",
+        "pressure_error",
     ],
     meta_fields=["test", "keys"],
 )
@@ -309,26 +340,31 @@ def _reduce_run(
     every_sample: bool = False,
     per_segment: int | None = None,
     known_segments: list | None = None,
+    input_error: bool = False,
 ) -> dict:
     """One run binned by ``k`` samples, or (``per_segment``) into that many bins per segment of its denoised
     driving inputs (:func:`segment_bins`; segmentations of earlier runs of the protocol in ``known_segments``
     reused, see :data:`SNAP_FRACTION`): simulation times and inputs (two per bin, :func:`quadrature_times`, or
     with ``every_sample`` ``k`` per bin, :func:`sample_times`; driving inputs denoised), observed bin means,
-    counts, and the raw noise sd of each driving input (for :func:`_share_repeats`)."""
+    counts, and the raw noise sd of each driving input (for :func:`_share_repeats`); with ``input_error``, the
+    fitted inputs' error basis at the simulation's times (``error_basis``: name -> (p m, q))."""
     signal, _ = OBSERVED[run.test]
     driving = DRIVING_INPUTS[run.test] if denoise else ()
     if run.test == "step" and run.supply_pa is None:
         raise ValueError(f"step run {run.key} has no supply pressure; the step likelihood needs supply_kpa")
-    out, input_sd, fitted = {}, {}, {}
+    out, input_sd, fitted, basis = {}, {}, {}, {}
     for name in ("strain", "pressure_pa", "supply_pa"):
         raw = getattr(run, name)
         if raw is not None and name in driving:
             input_sd[name] = noise_sd(raw)
-            raw = piecewise_linear_fit(run.time_s, raw, input_sd[name])
+            values = raw
+            raw, segments = piecewise_linear_segments(run.time_s, values, input_sd[name])
+            if input_error and name in ERROR_INPUTS:
+                basis[name] = fit_error_basis(run.time_s, values, segments, input_sd[name])
         fitted[name] = raw
     if per_segment is not None:
         smooth = [
-            fitted[name] if name in driving else piecewise_linear_fit(run.time_s, fitted[name])
+            fitted[name] if name in driving else piecewise_linear_segments(run.time_s, fitted[name])[0]
             for name in DRIVING_INPUTS[run.test]
             if fitted[name] is not None
         ]
@@ -350,6 +386,32 @@ def _reduce_run(
     has_load = run.load_n is not None and np.any(np.isfinite(run.load_n))
     out["load_n"] = float(np.nanmedian(run.load_n)) if has_load else None
     out["input_sd"] = input_sd
+    out["error_basis"] = {
+        name: b if one_per_bin else np.stack([np.interp(sim_time, run.time_s, c) for c in b.T], axis=-1)
+        for name, b in basis.items()
+    }
+    return out
+
+
+def _shared_input_error(bases: list[dict], names: tuple[str, ...], points: int) -> dict[str, np.ndarray]:
+    """Columns (q, points) per input name of the error of the mean of ``bases``' runs' fitted inputs (each
+    run's error ``B_i a_i``, independent): the exact low-rank factor of ``sum_i B_i B_i^T / n^2``. Inputs are
+    stacked so that each column perturbs one input (zeros in the others)."""
+    n = len(bases)
+    blocks = []
+    for name in names:
+        stacked = np.concatenate([b[name] for b in bases], axis=1) / n  # (points, sum q_i)
+        if stacked.shape[1] == 0:
+            continue
+        left, values, _ = np.linalg.svd(stacked, full_matrices=False)
+        keep = values > np.sqrt(_ERROR_RANK_TOLERANCE) * max(values.max(), 1e-300)
+        blocks.append((name, (left[:, keep] * values[keep]).T))
+    q = sum(b.shape[0] for _, b in blocks)
+    out = {name: np.zeros((q, points)) for name in names}
+    row = 0
+    for name, block in blocks:
+        out[name][row : row + block.shape[0]] = block
+        row += block.shape[0]
     return out
 
 
@@ -390,6 +452,7 @@ def prepare(
     denoise_inputs: bool = True,
     share_repeats: bool = True,
     every_sample: frozenset = frozenset(),
+    input_errors: frozenset = INPUT_ERROR_TESTS,
 ) -> Observations:
     """Reduce ``dataset`` for the likelihood: denoise the driving inputs (``denoise_inputs``, see
     :data:`DRIVING_INPUTS`), bin every run, stack runs of a test that have the same number of bins, and let
@@ -400,7 +463,8 @@ def prepare(
     module docstring; tests not listed are not binned). ``bin_sizes`` (test -> samples per bin, missing tests
     from :data:`DEFAULT_BIN_SIZES`) bins by a fixed count instead. Tests in ``every_sample`` (fixed-count
     binning only) are simulated at every sample and the predictions averaged per bin (:func:`sample_times`)
-    instead of at two quadrature nodes per bin."""
+    instead of at two quadrature nodes per bin. Tests in ``input_errors`` carry their fitted inputs' error
+    into the likelihood (see the module docstring; only with ``denoise_inputs``)."""
     if bin_sizes is not None:
         bin_sizes = MappingProxyType({**DEFAULT_BIN_SIZES, **dict(bin_sizes)})
         per_segment = MappingProxyType({})
@@ -415,7 +479,13 @@ def prepare(
     for run in dataset.runs:
         known = segmentations.setdefault((run.test, run.specimen, run.time_s.shape[0]), [])
         reduced = _reduce_run(
-            run, bin_sizes.get(run.test), denoise_inputs, run.test in every_sample, per_segment.get(run.test), known
+            run,
+            bin_sizes.get(run.test),
+            denoise_inputs,
+            run.test in every_sample,
+            per_segment.get(run.test),
+            known,
+            input_error=denoise_inputs and run.test in input_errors,
         )
         if reduced["load_n"] is None:
             if run.test == "step":
@@ -434,6 +504,24 @@ def prepare(
             rows = np.stack([red[name] for _, red in members])
             return np.stack([rows[shared == j].mean(axis=0) for j in range(len(simulated))])
 
+        errors = {name: None for name in ERROR_INPUTS}
+        if denoise_inputs and test in input_errors:
+            points = members[0][1]["time_s"].shape[0]
+            names = tuple(n for n in ERROR_INPUTS if any(n in red["error_basis"] for _, red in members))
+            for _, red in members:  # an input not fitted in a run (no noise): no error of its own
+                for name in names:
+                    red["error_basis"].setdefault(name, np.zeros((points, 0)))
+            per_set = [
+                _shared_input_error([members[i][1]["error_basis"] for i in np.flatnonzero(shared == j)], names, points)
+                for j in range(len(simulated))
+            ]
+            q = max([0] + [next(iter(e.values())).shape[0] for e in per_set if e])
+            for name in ERROR_INPUTS:
+                padded = np.zeros((len(simulated), q, points))
+                for j, e in enumerate(per_set):
+                    if name in e:
+                        padded[j, : e[name].shape[0]] = e[name]
+                errors[name] = padded
         groups.append(
             RunGroup(
                 test=test,
@@ -448,6 +536,8 @@ def prepare(
                 observed=np.stack([red["observed"] for _, red in members]),
                 counts=np.stack([red["counts"] for _, red in members]),
                 shared=shared,
+                strain_error=errors["strain"],
+                pressure_error=errors["pressure_pa"],
             )
         )
     return Observations(specimens, tuple(groups), bin_sizes, dataset.geometry, per_segment)
@@ -469,6 +559,40 @@ def _simulate(test: str, params, time_s, strain, pressure_pa, supply_pa, load_n,
     return result.strain, result.max_residual
 
 
+def _per_specimen(params):
+    """``(model, offset)``: ``params`` without the specimen offsets, and the offsets as a mapping name ->
+    (n_specimens,) log factor (or ``None``)."""
+    offset = params.get(SPECIMEN_OFFSET)
+    model = {k: v for k, v in params.items() if k != SPECIMEN_OFFSET}
+    if offset is not None and not isinstance(offset, dict):
+        offset = {k: offset for k in SPECIMEN_SCALED if k in model}
+    return model, offset
+
+
+def _predict_sets(params, group: RunGroup, strain, pressure_pa, config: ModelConfig, geometry: Geometry):
+    """Predicted bin means (u, m) of every simulated input row of ``group``, driven by ``strain`` and
+    ``pressure_pa`` (u, p m), and each row's solver error (u,)."""
+    model, offset = _per_specimen(params)
+
+    def one(specimen, time_s, strain, pressure, supply, load):
+        p = {k: (v[specimen] if jnp.ndim(v) else v) for k, v in model.items()}
+        if offset is not None:
+            p = {k: v * jnp.exp(offset[k][specimen]) if k in offset else v for k, v in p.items()}
+        return _simulate(group.test, p, time_s, strain, pressure, supply, load, config, geometry)
+
+    supply = group.supply_pa if group.supply_pa is not None else pressure_pa
+    predicted, error = jax.vmap(one)(
+        jnp.asarray(group.specimen_index),
+        jnp.asarray(group.time_s),
+        strain,
+        pressure_pa,
+        jnp.asarray(supply),
+        jnp.asarray(group.load_n),
+    )
+    u, m = group.bin_time_s.shape
+    return predicted.reshape(u, m, group.points_per_bin).mean(axis=-1), error
+
+
 def predict(params, group: RunGroup, *, config: ModelConfig = DEFAULT_CONFIG, geometry: Geometry = PAPER_GEOMETRY):
     """Predicted observed signal (r, m) of every run in ``group`` and each run's solver error (r,).
 
@@ -478,30 +602,50 @@ def predict(params, group: RunGroup, *, config: ModelConfig = DEFAULT_CONFIG, ge
     ``{name: (n_specimens,)}`` each named parameter of specimen ``s`` is multiplied by its own
     ``exp(offset[name][s])`` (the hierarchical model of :class:`~peano_bayes.inference.posterior.Posterior`).
     """
-    offset = params.get(SPECIMEN_OFFSET)
-    params = {k: v for k, v in params.items() if k != SPECIMEN_OFFSET}
-    if offset is not None and not isinstance(offset, dict):
-        offset = {k: offset for k in SPECIMEN_SCALED if k in params}
-
-    def one(specimen, time_s, strain, pressure, supply, load):
-        p = {k: (v[specimen] if jnp.ndim(v) else v) for k, v in params.items()}
-        if offset is not None:
-            p = {k: v * jnp.exp(offset[k][specimen]) if k in offset else v for k, v in p.items()}
-        return _simulate(group.test, p, time_s, strain, pressure, supply, load, config, geometry)
-
-    supply = group.supply_pa if group.supply_pa is not None else group.pressure_pa
-    predicted, error = jax.vmap(one)(
-        jnp.asarray(group.specimen_index),
-        jnp.asarray(group.time_s),
-        jnp.asarray(group.strain),
-        jnp.asarray(group.pressure_pa),
-        jnp.asarray(supply),
-        jnp.asarray(group.load_n),
-    )
-    u, m = group.bin_time_s.shape
-    predicted = predicted.reshape(u, m, group.points_per_bin).mean(axis=-1)
+    strain, pressure = jnp.asarray(group.strain), jnp.asarray(group.pressure_pa)
+    predicted, error = _predict_sets(params, group, strain, pressure, config, geometry)
     shared = jnp.asarray(group.shared)
     return predicted[shared], error[shared]
+
+
+@eqx.filter_jit
+def input_error_jacobian(
+    params, group: RunGroup, *, config: ModelConfig = DEFAULT_CONFIG, geometry: Geometry = PAPER_GEOMETRY
+):
+    """``(predicted (u, m), solver error (u,), J (u, q, m))``: the prediction of every simulated input row and
+    its derivative along each column of the fitted inputs' error (:attr:`RunGroup.strain_error`,
+    :attr:`RunGroup.pressure_error`), by forward-mode differentiation of the simulation. Compiled once per
+    protocol (shapes) and configuration; inside a traced function it is inlined."""
+    strain, pressure = jnp.asarray(group.strain), jnp.asarray(group.pressure_pa)
+    fn = lambda s, p: _predict_sets(params, group, s, p, config, geometry)  # noqa: E731
+
+    def along(ds, dp):
+        (predicted, error), (tangent, _) = jax.jvp(fn, (strain, pressure), (ds, dp))
+        return predicted, error, tangent
+
+    d_strain = jnp.asarray(group.strain_error) if group.strain_error is not None else None
+    d_pressure = jnp.asarray(group.pressure_error)
+    if d_strain is None:
+        d_strain = jnp.zeros_like(d_pressure)
+    predicted, error, jac = jax.vmap(along, in_axes=(1, 1), out_axes=(None, None, 1))(d_strain, d_pressure)
+    return predicted, error, jac
+
+
+def _input_error_correction(residual, weight, jac, shared, n_sets: int):
+    """Per simulated row (u,): the change of the log-likelihood of its runs' residuals when the fitted inputs'
+    error ``J a``, ``a ~ N(0, I_q)``, is integrated out, ``b^T A^-1 b / 2 - ln det A / 2`` with
+    ``A = I + sum_runs J^T W J`` and ``b = sum_runs J^T W r`` (Woodbury; ``W`` = ``weight`` (r, m), the inverse
+    bin variances, zero where unmeasured; ``residual`` (r, m); ``jac`` (u, q, m))."""
+    per_run = jac[shared]  # (r, q, m)
+    gram = jnp.einsum("rqm,rm,rpm->rqp", per_run, weight, per_run)
+    proj = jnp.einsum("rqm,rm,rm->rq", per_run, weight, residual)
+    gram = jax.ops.segment_sum(gram, shared, num_segments=n_sets)
+    proj = jax.ops.segment_sum(proj, shared, num_segments=n_sets)
+    a = jnp.eye(jac.shape[1]) + gram
+    chol = jnp.linalg.cholesky(a)
+    solved = jax.scipy.linalg.cho_solve((chol, True), proj[..., None])[..., 0]
+    log_det = 2.0 * jnp.sum(jnp.log(jnp.diagonal(chol, axis1=-2, axis2=-1)), axis=-1)
+    return 0.5 * jnp.sum(proj * solved, axis=-1) - 0.5 * log_det
 
 
 def _log_density(residual, scale, family: str):
@@ -532,17 +676,61 @@ def group_log_likelihood(
     solver_tolerance=SOLVER_TOLERANCE,
 ):
     """``(predicted, scale, ll)``, each (r, m), of one run group: the prediction, each bin's noise sd and its
-    log-likelihood (see :func:`pointwise_log_likelihood`)."""
+    log-likelihood (see :func:`pointwise_log_likelihood`). Where the group carries its fitted inputs' error
+    (:attr:`RunGroup.has_input_error`), the log-likelihood of each simulated input's runs is their joint
+    density with that error integrated out, apportioned evenly over their measured bins (so per-bin values
+    are exact only in their sum over those runs). The Student-t family treats the fitted inputs as exact (the
+    integral is Gaussian)."""
     if family not in ("gaussian", "student_t"):
         raise ValueError(f"family must be 'gaussian' or 'student_t', got {family!r}")
     model = {k: v for k, v in params.items() if k not in NOISE_PARAMETERS and k != "specimen_log_sd"}
-    predicted, solver_error = predict(model, group, config=config, geometry=geometry)
     scale = bin_noise_sd(params[OBSERVED[group.test][1]], group)
     observed = jnp.asarray(group.observed)
     measured = jnp.isfinite(observed)
-    ll = jnp.where(measured, _log_density(jnp.where(measured, observed, 0.0) - predicted, scale, family), 0.0)
+    with_input_error = group.has_input_error and family == "gaussian"
+    if with_input_error:
+        sets, solver_error, jac = input_error_jacobian(model, group, config=config, geometry=geometry)
+        shared = jnp.asarray(group.shared)
+        predicted, solver_error = sets[shared], solver_error[shared]
+    else:
+        predicted, solver_error = predict(model, group, config=config, geometry=geometry)
+    residual = jnp.where(measured, observed, 0.0) - predicted
+    ll = jnp.where(measured, _log_density(residual, scale, family), 0.0)
+    if with_input_error:
+        weight = jnp.where(measured, 1.0 / scale**2, 0.0)
+        n_sets = group.specimen_index.shape[0]
+        correction = _input_error_correction(jnp.where(measured, residual, 0.0), weight, jac, shared, n_sets)
+        # Apportioned evenly over the measured bins of the runs sharing the input, so sums are exact.
+        bins = jax.ops.segment_sum(jnp.sum(measured, axis=1), shared, num_segments=n_sets)
+        ll = ll + jnp.where(measured, (correction / jnp.maximum(bins, 1))[shared][:, None], 0.0)
     bad = ~jnp.all(jnp.isfinite(predicted), axis=1) | ~(solver_error <= solver_tolerance[group.test])
     return predicted, scale, jnp.where(bad[:, None] | ~jnp.isfinite(ll), -jnp.inf, ll)
+
+
+def whitened_residuals(
+    params, group: RunGroup, *, config: ModelConfig = DEFAULT_CONFIG, geometry: Geometry = PAPER_GEOMETRY
+) -> np.ndarray:
+    """(r, m) residuals of ``group`` at ``params`` in units of their noise, NaN where unmeasured: (observed -
+    predicted) / bin sd, or, where the fitted inputs' error enters the likelihood, the residuals of the runs
+    sharing an input whitened by the Cholesky factor of their joint covariance (in run, bin order). Either way
+    they are independent standard normals when the model is right, so their rms is the fit in noise units."""
+    model = {k: v for k, v in params.items() if k not in NOISE_PARAMETERS and k != "specimen_log_sd"}
+    scale = np.asarray(bin_noise_sd(params[OBSERVED[group.test][1]], group))
+    if not group.has_input_error:
+        predicted, _ = predict(model, group, config=config, geometry=geometry)
+        return (np.asarray(group.observed) - np.asarray(predicted)) / scale
+    sets, _, jac = input_error_jacobian(model, group, config=config, geometry=geometry)
+    residual = np.asarray(group.observed) - np.asarray(sets)[group.shared]
+    out = np.full(residual.shape, np.nan)
+    for j in range(np.asarray(sets).shape[0]):
+        rows = np.flatnonzero(group.shared == j)
+        measured = np.isfinite(residual[rows]).ravel()
+        u = np.concatenate([np.asarray(jac[j]).T] * rows.size)[measured]
+        cov = np.diag((scale[rows] ** 2).ravel()[measured]) + u @ u.T
+        z = np.full(measured.size, np.nan)
+        z[measured] = np.linalg.solve(np.linalg.cholesky(cov), residual[rows].ravel()[measured])
+        out[rows] = z.reshape(rows.size, -1)
+    return out
 
 
 def pointwise_log_likelihood(
@@ -575,6 +763,7 @@ __all__ = [
     "DEFAULT_BIN_SIZES",
     "DEFAULT_BINS_PER_SEGMENT",
     "DRIVING_INPUTS",
+    "INPUT_ERROR_TESTS",
     "NOISE_PARAMETERS",
     "SPECIMEN_OFFSET",
     "SPECIMEN_SCALED",
@@ -586,6 +775,7 @@ __all__ = [
     "bin_means",
     "bin_noise_sd",
     "group_log_likelihood",
+    "input_error_jacobian",
     "log_likelihood",
     "pointwise_log_likelihood",
     "predict",
@@ -594,4 +784,5 @@ __all__ = [
     "sample_times",
     "segment_bins",
     "segment_starts",
+    "whitened_residuals",
 ]

@@ -181,12 +181,17 @@ class Posterior:
             [p[np.isfinite(g.observed)] for p, g in zip(parts, self.observations.groups, strict=True)]
         )
 
-    def log_prob(self, theta, groups=None):
+    def log_prob(self, theta, groups=None, *, exact_inputs: bool = False):
         """ln p(theta | data) up to a constant; ``-inf``, never NaN, for any theta. ``groups`` (default this
-        posterior's) may be traced: unmeasured bins contribute 0, so no data-dependent masking is needed."""
+        posterior's) may be traced: unmeasured bins contribute 0, so no data-dependent masking is needed.
+        ``exact_inputs``: treat the fitted driving inputs as exact (leave their error out of the likelihood,
+        see :data:`~peano_bayes.inference.likelihood.INPUT_ERROR_TESTS`)."""
         observations = self.observations
         if groups is not None:
             observations = dataclasses.replace(observations, groups=tuple(groups))
+        if exact_inputs:
+            exact = tuple(dataclasses.replace(g, strain_error=None, pressure_error=None) for g in observations.groups)
+            observations = dataclasses.replace(observations, groups=exact)
         lp = self.log_prior(theta)
         parts = pointwise_log_likelihood(self.params(theta), observations, config=self.config, family=self.family)
         ll = sum(jnp.sum(p) for p in parts)
@@ -214,8 +219,15 @@ class Posterior:
 
     @property
     def value_and_grad(self):
-        """``f(theta (D,)) -> (-ln p, gradient)`` of the negative log posterior, compiled once per family."""
-        f = self._shared("value_and_grad", lambda: jax.jit(jax.value_and_grad(lambda t, g: -self.log_prob(t, g))))
+        """``f(theta (D,)) -> (-ln p, gradient)`` of the negative log posterior, compiled once per family, with
+        the fitted driving inputs treated as exact (``log_prob(..., exact_inputs=True)``). It serves the mode and
+        the Laplace covariance that start the sampler, and its gradient through the input error's forward-mode
+        derivatives would cost a second-order compilation (measured on TP: 95 s against 41 s,
+        ``experiments/bench_input_error.py``) for a start point that the overdispersed start absorbs."""
+        f = self._shared(
+            "value_and_grad",
+            lambda: jax.jit(jax.value_and_grad(lambda t, g: -self.log_prob(t, g, exact_inputs=True))),
+        )
         groups = self.observations.groups
         return lambda theta: f(jnp.asarray(theta, dtype=jnp.float64), groups)
 
@@ -235,21 +247,28 @@ class Posterior:
 
     def observed(self) -> dict[str, np.ndarray]:
         """The measured bins, in :meth:`pointwise` order: ``value``, ``test``, ``specimen``, ``run``,
-        ``time_s``, ``count``, ``unit``."""
-        cols: dict[str, list] = {k: [] for k in ("value", "test", "specimen", "run", "time_s", "count", "unit")}
+        ``time_s``, ``count``, ``unit``, and the inputs the simulation was driven with, averaged over each bin:
+        ``strain`` [-] (imposed in a load cycle; the measured strain in the other tests) and ``pressure_pa``."""
+        numeric = ("value", "time_s", "count", "strain", "pressure_pa")
+        cols: dict[str, list] = {k: [] for k in (*numeric, "test", "specimen", "run", "unit")}
         for g in self.observations.groups:
             ok = np.isfinite(g.observed)
             time_s = g.bin_time_s[g.shared]
+            m = g.observed.shape[1]
+            per_bin = lambda x, g=g, m=m: np.asarray(x)[g.shared].reshape(len(g.shared), m, -1).mean(axis=-1)  # noqa: E731
+            strain, pressure = per_bin(g.strain), per_bin(g.pressure_pa)
             for r, key in enumerate(g.keys):
                 n = int(ok[r].sum())
                 cols["value"].append(g.observed[r][ok[r]])
                 cols["time_s"].append(time_s[r][ok[r]])
                 cols["count"].append(g.counts[r][ok[r]])
+                cols["strain"].append(strain[r][ok[r]])
+                cols["pressure_pa"].append(pressure[r][ok[r]])
                 cols["test"] += [g.test] * n
                 cols["specimen"] += [key[0]] * n
                 cols["run"] += [int(key[2])] * n
                 cols["unit"] += ["N" if OBSERVED[g.test][0] == "force_n" else "-"] * n
-        return {k: (np.concatenate(v) if k in ("value", "time_s", "count") else np.asarray(v)) for k, v in cols.items()}
+        return {k: (np.concatenate(v) if k in numeric else np.asarray(v)) for k, v in cols.items()}
 
 
 def build_posterior(

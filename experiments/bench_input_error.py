@@ -1,0 +1,81 @@
+"""Cost of integrating the fitted inputs' error out of the likelihood (``likelihood.INPUT_ERROR_TESTS``): the
+log posterior of a bundled material's load cycles, blocking and stroke tests with the stroke test's input error
+(ours) and with the inputs treated as exact (the reference, ``prepare(..., input_errors=frozenset())``), side by
+side in one process: compile time and evaluations per second of the batched log posterior (the sampler's) and
+compile time and calls per second of its value and gradient (what the mode's search would cost with the input
+error in; the package's ``Posterior.value_and_grad`` treats the inputs as exact for that reason). The last line
+printed is one JSON object with the ratios ours / reference.
+
+    python experiments/bench_input_error.py [CODE] [--batch 144] [--repeats 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from peano_bayes.bundled import dataset_path
+from peano_bayes.data import load
+from peano_bayes.inference.likelihood import prepare
+from peano_bayes.inference.posterior import build_posterior
+from peano_bayes.inference.priors import prior_for
+
+
+def timed(fn, arg, repeats: int) -> tuple[float, float]:
+    """(compile + first call seconds, best of ``repeats`` later calls in seconds)."""
+    t0 = time.perf_counter()
+    fn(arg)
+    first = time.perf_counter() - t0
+    best = np.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn(arg)
+        best = min(best, time.perf_counter() - t0)
+    return first, best
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("code", nargs="?", default="TP")
+    parser.add_argument("--batch", type=int, default=144, help="walkers per batched call (4 ensembles of 36)")
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args()
+    dataset = load(dataset_path(args.code))
+    dataset = dataclasses.replace(dataset, runs=tuple(r for r in dataset.runs if r.test != "step"))
+    prior = prior_for(args.code)
+    out = {"material": args.code, "batch": args.batch}
+    for label, errors in (("reference", frozenset()), ("ours", None)):
+        observations = prepare(dataset) if errors is None else prepare(dataset, input_errors=errors)
+        posterior = build_posterior(observations, prior)
+        theta = np.zeros(posterior.ndim)  # prior medians, specimens at their mean, spread at exp(0)
+        theta[: posterior.prior.ndim] = np.asarray(posterior.prior.median_unconstrained())
+        thetas = np.tile(theta, (args.batch, 1))
+        compile_batched, best_batched = timed(posterior.batched, thetas, args.repeats)
+        # The full likelihood's gradient (the package's own value_and_grad treats the inputs as exact).
+        full = jax.jit(jax.value_and_grad(lambda t, post=posterior: -post.log_prob(t)))
+        compile_grad, best_grad = timed(full, jnp.asarray(theta), args.repeats)
+        out[label] = {
+            "batched_compile_s": round(compile_batched, 2),
+            "evaluations_per_s": round(args.batch / best_batched, 1),
+            "grad_compile_s": round(compile_grad, 2),
+            "grad_calls_per_s": round(1.0 / best_grad, 2),
+        }
+        print(label, out[label], flush=True)
+    out["evaluation_cost_ratio"] = round(out["reference"]["evaluations_per_s"] / out["ours"]["evaluations_per_s"], 3)
+    out["grad_cost_ratio"] = round(out["reference"]["grad_calls_per_s"] / out["ours"]["grad_calls_per_s"], 3)
+    out["extra_compile_s"] = round(
+        out["ours"]["batched_compile_s"] + out["ours"]["grad_compile_s"]
+        - out["reference"]["batched_compile_s"] - out["reference"]["grad_compile_s"],
+        1,
+    )
+    print(json.dumps(out))
+
+
+if __name__ == "__main__":
+    main()

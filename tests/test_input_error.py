@@ -1,0 +1,119 @@
+"""The fitted driving inputs' own error, integrated out of the likelihood (likelihood module docstring)."""
+
+import json
+from dataclasses import replace
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy import stats
+
+from peano_bayes.inference.denoise import fit_error_basis, piecewise_linear_segments
+from peano_bayes.inference.likelihood import (
+    _input_error_correction,
+    group_log_likelihood,
+    input_error_jacobian,
+    prepare,
+    whitened_residuals,
+)
+from peano_bayes.rig import RigNoise, simulate_dataset
+
+
+def test_error_basis_is_the_covariance_of_a_ramps_fit():
+    """The stroke test's input, one ramp with white noise, 2000 noise draws: at least 95 % are denoised as one
+    ramp (measured: 98 %; the rest split it, and their error is larger than the basis says), and over those the
+    covariance of the fit minus the truth is B B^T (diagonal within 10 %; the sd of a variance estimate is 3 %)."""
+    rng = np.random.default_rng(5)
+    t = np.linspace(0.0, 20.0, 100)
+    truth, sd = 1.5e3 * t, 500.0
+    fits = [piecewise_linear_segments(t, truth + sd * rng.standard_normal(t.size), sd) for _ in range(2000)]
+    errors = [fitted - truth for fitted, segments in fits if len(segments) == 1]
+    assert len(errors) >= 0.95 * len(fits)
+    basis = fit_error_basis(t, truth, [(0, t.size, True)], sd)
+    assert basis.shape == (100, 2)  # offset and slope
+    empirical = np.cov(np.array(errors).T)
+    predicted = basis @ basis.T
+    np.testing.assert_allclose(np.diag(empirical), np.diag(predicted), rtol=0.1)
+    np.testing.assert_allclose(empirical[0, [25, 50, 99]], predicted[0, [25, 50, 99]], atol=0.1 * predicted[0, 0])
+
+
+def test_error_basis_of_a_ramp_and_a_hold_given_their_segments():
+    """Segments fixed (a ramp of 70 samples, a hold of 50): each fitted by hand (numpy polyfit, a mean), the
+    covariance of the fit's error over 4000 draws is B B^T, and the two segments' errors are independent."""
+    rng = np.random.default_rng(6)
+    t = np.linspace(0.0, 10.0, 120)
+    sd = 2.0
+    segments = [(0, 70, True), (70, 120, False)]
+
+    def by_hand(noise):
+        ramp = np.polyval(np.polyfit(t[:70], noise[:70], 1), t[:70])
+        return np.concatenate([ramp, np.full(50, noise[70:].mean())])
+
+    errors = np.array([by_hand(sd * rng.standard_normal(t.size)) for _ in range(4000)])
+    basis = fit_error_basis(t, np.zeros_like(t), segments, sd)
+    assert basis.shape == (120, 3)
+    predicted = basis @ basis.T
+    empirical = np.cov(errors.T)
+    np.testing.assert_allclose(np.diag(empirical), np.diag(predicted), rtol=0.1)
+    assert np.all(predicted[:70, 70:] == 0.0) and np.all(np.abs(empirical[:70, 70:]) < 0.1 * predicted[0, 0])
+
+
+def test_woodbury_correction_is_the_dense_gaussian():
+    """Independent bins plus the correction equal, per simulated input, scipy's multivariate normal of the
+    stacked residuals of the runs sharing it, with covariance diag(1 / w) + (1 J)(1 J)^T."""
+    rng = np.random.default_rng(0)
+    shared = np.array([0, 0, 1, 0])
+    r, m, q = 4, 15, 2
+    residual = rng.normal(size=(r, m)) * 0.3
+    weight = rng.uniform(2.0, 10.0, size=(r, m))
+    weight[1, 3] = 0.0  # an unmeasured bin
+    residual[1, 3] = 0.0
+    jac = rng.normal(size=(2, q, m)) * 0.4
+    correction = np.asarray(_input_error_correction(residual, weight, jac, jnp.asarray(shared), 2))
+    for j in range(2):
+        rows = np.flatnonzero(shared == j)
+        mask = weight[rows].ravel() > 0
+        res = residual[rows].ravel()[mask]
+        var = 1.0 / weight[rows].ravel()[mask]
+        u = np.concatenate([jac[j].T] * rows.size)[mask]
+        independent = np.sum(stats.norm.logpdf(res, scale=np.sqrt(var)))
+        joint = stats.multivariate_normal(np.zeros(res.size), np.diag(var) + u @ u.T).logpdf(res)
+        assert independent + correction[j] == pytest.approx(joint, rel=1e-10)
+
+
+@pytest.fixture(scope="module")
+def stroke():
+    """TP stroke tests at the nominal parameters, one specimen, three repeats sharing one simulation, 30 bins
+    per segment."""
+    dataset = simulate_dataset("TP", None, seed=4, specimens=1, repeats=3, noise=RigNoise(), tests=("stroke",))
+    obs = prepare(dataset, bins_per_segment={"stroke": 30})
+    (group,) = obs.groups
+    (own,) = json.loads(dataset.provenance["specimen_parameters"]).values()  # the specimen's generating values
+    params = {k: jnp.asarray(v) for k, v in own.items()}
+    return obs, group, {**params, "noise_stroke_strain": jnp.asarray(RigNoise().strain_sd)}
+
+
+def test_input_jacobian_matches_finite_differences_and_whitens_the_truths_residuals(stroke):
+    obs, group, params = stroke
+    assert group.has_input_error and group.pressure_error.shape[:2] == (1, 2)  # one shared ramp: offset, slope
+    model = {k: v for k, v in params.items() if k != "noise_stroke_strain"}
+    _, _, jac = input_error_jacobian(model, group, geometry=obs.geometry)
+    h = 1e-3  # of one column: ~0.03 Pa on a 30 kPa ramp
+
+    def moved(sign):  # the prediction (same compiled function, inputs moved along the first column)
+        g = replace(group, pressure_pa=group.pressure_pa + sign * h * group.pressure_error[:, 0])
+        return np.asarray(input_error_jacobian(model, g, geometry=obs.geometry)[0])
+
+    fd = (moved(1.0) - moved(-1.0)) / (2.0 * h)
+    np.testing.assert_allclose(np.asarray(jac)[0, 0], fd[0], rtol=1e-4, atol=1e-6 * np.abs(fd).max())
+
+    # At the generating values the whitened residuals are standard normal: 90 of them, rms sd 0.075.
+    white = whitened_residuals(params, group, geometry=obs.geometry)
+    assert np.all(np.isfinite(white))
+    assert 0.8 < float(np.sqrt(np.mean(white**2))) < 1.2
+    # The group's log-likelihood sums to the dense Gaussian of the stacked runs, covariance D + (1 J)(1 J)^T.
+    predicted, scale, ll = (np.asarray(a) for a in group_log_likelihood(params, group, geometry=obs.geometry))
+    residual = (np.asarray(group.observed) - predicted).ravel()
+    u = np.concatenate([np.asarray(jac)[0].T] * 3)
+    dense = stats.multivariate_normal(np.zeros(residual.size), np.diag(scale.ravel() ** 2) + u @ u.T)
+    assert float(ll.sum()) == pytest.approx(dense.logpdf(residual), rel=1e-9)
