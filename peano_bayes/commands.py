@@ -446,7 +446,9 @@ def rank_command(args):
     if twice:
         raise PeanoBayesInputError(f"material(s) given more than once: {', '.join(twice)}")
     prior_only = {name for m in metrics for name, s in m.get("summary", {}).items() if s.get("from_prior")}
-    report = rank_materials({m["material"]: m["draws"] for m in metrics}, from_prior=prior_only)
+    pressures = {m["material"]: m.get("test_pressure_kpa") for m in metrics}
+    draws = {m["material"]: m["draws"] for m in metrics}
+    report = rank_materials(draws, from_prior=prior_only, test_pressure_kpa=pressures)
     out = Path(args.out) if args.out else Path(args.results[0]).resolve().parent
     out.mkdir(parents=True, exist_ok=True)
     text = ranking_markdown(report)

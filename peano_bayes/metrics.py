@@ -318,7 +318,8 @@ def evaluate_result(
     path: str | Path, *, n_draws: int = 100, seed: int = 0, hdi_prob: float = 0.94, progress: bool = True
 ) -> dict:
     """Posterior metrics of one result (``posterior.nc`` or its directory), compared with the paper, written to
-    ``metrics.json`` beside the result (atomically); returns what it wrote: ``material``, ``n_draws``,
+    ``metrics.json`` beside the result (atomically); returns what it wrote: ``material``,
+    ``test_pressure_kpa`` (the pressure its metrics are simulated at; ``None`` if unknown), ``n_draws``,
     ``n_failed``, ``prior_only``, ``summary`` (:meth:`PosteriorMetrics.summary`), ``published``
     (:func:`compare_published`) and ``draws`` (metric -> list of values, for :mod:`peano_bayes.ranking`)."""
     from tqdm.auto import tqdm
@@ -332,8 +333,11 @@ def evaluate_result(
     bar = (lambda it: tqdm(it, desc=f"{material} metrics", unit="draw")) if progress else None
     result = posterior_metrics(idata, n_draws=n_draws, seed=seed, progress=bar)
     summary = result.summary(hdi_prob)
+    spec = protocol_material(idata)
+    spec = spec if isinstance(spec, MaterialSpec) else MATERIALS.get(spec)
     out = {
         "material": material,
+        "test_pressure_kpa": None if spec is None else spec.test_pressure_pa / 1e3,
         "n_draws": n_draws,
         "n_failed": result.n_failed,
         "prior_only": list(result.prior_only),

@@ -494,7 +494,12 @@ def report_results(out_dir: str | Path, materials=BUNDLED_MATERIALS, *, n_draws:
             log(f"{code}: figures in {directory / 'figures'}")
         results[code] = load_result(directory)
     prior_only = {name for m in metrics.values() for name, s in m["summary"].items() if s["from_prior"]}
-    ranking = rank_materials({c: m["draws"] for c, m in metrics.items()}, from_prior=prior_only) if metrics else None
+    pressures = {c: m.get("test_pressure_kpa") for c, m in metrics.items()}
+    ranking = (
+        rank_materials({c: m["draws"] for c, m in metrics.items()}, from_prior=prior_only, test_pressure_kpa=pressures)
+        if metrics
+        else None
+    )
     if ranking:
         write_text(out_dir / "ranking.json", json.dumps(ranking, indent=1))
         write_text(out_dir / "ranking.md", "# Ranking\n\n" + ranking_markdown(ranking) + "\n")

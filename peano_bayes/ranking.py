@@ -175,14 +175,16 @@ def ordering_checks(draws: dict) -> list[dict]:
     return out
 
 
-def rank_materials(draws: dict, from_prior=()) -> dict:
+def rank_materials(draws: dict, from_prior=(), test_pressure_kpa: dict | None = None) -> dict:
     """Everything :mod:`peano_bayes.ranking` computes, as plain data: ``materials``; ``criteria`` (per
     criterion: ``p_best``, ``mean_rank``, ``rank_interval`` by material, ``p_better`` matrix rows by material,
     the margin probabilities, ``n`` draws; criteria no draw defines are left out); ``pareto`` (P(Pareto-optimal)
     by material, over the Pareto criteria that are ranked); ``orderings`` (:func:`ordering_checks`);
     ``left_out`` (criterion -> why it is not ranked). ``draws``: code -> metric -> (n,) values; ``from_prior``:
     metrics the data did not inform in some material (e.g. the step metrics of fits without the step test):
-    they are **not ranked**, since their draws are the prior's and a ranking of them would rank the priors."""
+    they are **not ranked**, since their draws are the prior's and a ranking of them would rank the priors.
+    ``test_pressure_kpa``: code -> the pressure each material's metrics were simulated at (each at its own test
+    pressure); kept in the report so that :func:`ranking_markdown` can say when they differ."""
     materials = tuple(draws)
     from_prior = set(from_prior)
     criteria = {}
@@ -229,6 +231,7 @@ def rank_materials(draws: dict, from_prior=()) -> dict:
         "pareto_criteria": list(pareto_criteria),
         "orderings": orderings,
         "left_out": left_out,
+        "test_pressure_kpa": dict(test_pressure_kpa or {}),
     }
 
 
@@ -244,6 +247,18 @@ def ranking_markdown(report: dict) -> str:
         "several materials are near best with high probability, the data do not tell them apart for design.",
         "",
     ]
+    pressures = {c: p for c, p in report.get("test_pressure_kpa", {}).items() if p is not None}
+    if len(set(pressures.values())) > 1:
+        groups = {}
+        for code, p in pressures.items():
+            groups.setdefault(p, []).append(code)
+        listed = "; ".join(f"{p:g} kPa: {', '.join(codes)}" for p, codes in sorted(groups.items()))
+        lines += [
+            f"*Test pressures differ* ({listed}). Each material is compared at its own test pressure: a per-MPa "
+            "criterion is its value there divided by that pressure, and comparing those across pressures assumes "
+            "the per-MPa value does not change with pressure (the paper's Table 3 makes the same assumption).",
+            "",
+        ]
     lines.append("| criterion | " + " | ".join(materials) + " |")
     lines.append("|---|" + "---|" * len(materials))
     for criterion, r in report["criteria"].items():

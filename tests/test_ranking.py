@@ -108,3 +108,13 @@ def test_rank_command_writes_its_report_and_refuses_missing_metrics(tmp_path, rn
     err = capsys.readouterr().err
     assert "metrics.json: no such file" in err and "Traceback" not in err
     assert not (tmp_path / "new").exists()
+
+
+def test_ranking_says_when_materials_were_tested_at_different_pressures(rng):
+    from peano_bayes.ranking import ranking_markdown
+
+    draws = _draws(rng, {"TP": 1.0, "FC": 2.0, "P": 1.5}, n=200)
+    mixed = ranking_markdown(rank_materials(draws, test_pressure_kpa={"TP": 30.0, "FC": 200.0, "P": 30.0}))
+    assert "*Test pressures differ* (30 kPa: TP, P; 200 kPa: FC)" in mixed
+    same = ranking_markdown(rank_materials(draws, test_pressure_kpa={"TP": 30.0, "FC": 30.0, "P": 30.0}))
+    assert "Test pressures differ" not in same and "Test pressures differ" not in ranking_markdown(rank_materials(draws))
