@@ -2,7 +2,9 @@
 save PNG and PDF atomically.
 
 Per material (``OUT/<code>/figures/``): ``predictive`` (data over the 94 % posterior predictive band, one run
-per condition of each fitted test) and ``corner`` (pairs of the physical parameters, arviz). Across materials
+per condition of each fitted test, against time), ``response`` (the same runs against their driving input:
+force-strain loops per pressure, blocking force and stroke against pressure, each over a residual panel) and
+``corner`` (pairs of the physical parameters, arviz). Across materials
 (``OUT/figures/``): ``forest`` (each physical parameter's posterior per material), ``published`` (posterior
 metrics against the paper's values) and ``ranking`` (P(best) per criterion).
 """
@@ -75,6 +77,8 @@ def predictive_runs(idata) -> list[dict]:
             out.append(
                 dict(
                     test=test,
+                    specimen=first,
+                    run=run,
                     title=f"{TEST_TITLE.get(test, test)}: specimen {first}, run {run}",
                     time_s=time_s[mask],
                     observed=y[mask],
@@ -83,6 +87,39 @@ def predictive_runs(idata) -> list[dict]:
                     high=high,
                 )
             )
+    return out
+
+
+#: Per test: the driving input a figure plots against (observed_data variable, scale, axis label).
+RESPONSE_AXIS = {
+    "load_cycle": ("strain", 1.0, "strain [-]"),
+    "blocking": ("pressure_pa", 1e-3, "pressure [kPa]"),
+    "stroke": ("pressure_pa", 1e-3, "pressure [kPa]"),
+}
+
+
+def response_runs(idata) -> list[dict]:
+    """The runs of :func:`predictive_runs` of the quasi-static tests against their driving input, as engineers
+    read them: load cycles as force against strain (one per pressure), blocking force and stroke against
+    pressure. Each panel adds ``x`` and ``xlabel``; the title names the condition. Empty for results written
+    before the inputs were stored (no ``strain`` in ``observed_data``)."""
+    obs = idata.observed_data
+    if "strain" not in obs:
+        return []
+    tests, specimens, runs = (np.asarray(obs[k].values) for k in ("test", "specimen", "run"))
+    out = []
+    for panel in predictive_runs(idata):
+        if panel["test"] not in RESPONSE_AXIS:
+            continue
+        name, scale, xlabel = RESPONSE_AXIS[panel["test"]]
+        specimen, run = panel["specimen"], panel["run"]
+        mask = (tests == panel["test"]) & (specimens == specimen) & (runs == run)
+        x = np.asarray(obs[name].values)[mask] * scale
+        title = panel["title"]
+        if panel["test"] == "load_cycle":
+            pressure_kpa = float(np.median(np.asarray(obs["pressure_pa"].values)[mask])) / 1e3
+            title = f"load cycle at {pressure_kpa:.0f} kPa: specimen {specimen}, run {run}"
+        out.append({**panel, "x": x, "xlabel": xlabel, "title": title})
     return out
 
 
@@ -169,6 +206,21 @@ def material_figures(result_dir: str | Path, dataset=None) -> list[Path]:
         fig.legend(handles, labels, loc="lower center", ncol=3, bbox_to_anchor=(0.5, -0.16), frameon=False)
         fig.suptitle(f"{code}: bin means of the data over the posterior predictive", y=1.02)
         written += save(fig, result_dir / "figures" / "predictive")
+        responses = response_runs(idata)
+        if responses:
+            fig, axes = plt.subplots(
+                2, len(responses), figsize=(3.2 * len(responses), 3.9), squeeze=False,
+                gridspec_kw={"height_ratios": (2.4, 1.0)}, sharex="col",
+            )
+            for top, bottom, p in zip(axes[0], axes[1], responses, strict=True):
+                plots.response_with_residuals(
+                    top, bottom, p["x"], p["observed"], p["low"], p["median"], p["high"],
+                    xlabel=p["xlabel"], ylabel=SIGNAL_LABEL[p["test"]], title=p["title"],
+                )
+            handles, labels = axes[0][0].get_legend_handles_labels()
+            fig.legend(handles, labels, loc="lower center", ncol=3, bbox_to_anchor=(0.5, -0.08), frameon=False)
+            fig.suptitle(f"{code}: responses against their driving input, 94 % posterior predictive", y=1.0)
+            written += save(fig, result_dir / "figures" / "response")
         names = physical_names(idata)
         axes = az.plot_pair(
             idata,

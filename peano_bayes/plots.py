@@ -121,6 +121,42 @@ def recommendation_bars(ax, labels, probability, *, title: str = ""):
         ax.set_title(title)
 
 
+def _monotone_pieces(x) -> list[slice]:
+    """Slices of ``x`` (n,) over which it runs one way (a load cycle's loading and unloading branches)."""
+    x = np.asarray(x, dtype=float)
+    if x.size < 3:
+        return [slice(0, x.size)]
+    direction = np.sign(np.diff(x))
+    turns = np.flatnonzero((direction[1:] != direction[:-1]) & (direction[1:] != 0) & (direction[:-1] != 0)) + 1
+    bounds = [0, *turns.tolist(), x.size - 1]
+    return [slice(a, b + 1) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+
+
+def response_with_residuals(
+    ax, ax_residual, x, observed, low, median, high, *, xlabel: str, ylabel: str, title: str = ""
+):
+    """One run against its driving input ``x`` (n,) (a load cycle's force against strain, a blocking force or
+    stroke against pressure): the 94 % predictive band and median over the data on ``ax``; under it on
+    ``ax_residual`` the data minus the median, with the band around the median shifted the same way. A loop is
+    banded branch by branch (:func:`_monotone_pieces`)."""
+    x, observed, low, median, high = (np.asarray(a, dtype=float) for a in (x, observed, low, median, high))
+    for i, piece in enumerate(_monotone_pieces(x)):
+        ax.fill_between(x[piece], low[piece], high[piece], color=MODEL_COLOUR, alpha=0.3, lw=0,
+                        label="94 % predictive interval" if i == 0 else None)
+        ax_residual.fill_between(x[piece], (low - median)[piece], (high - median)[piece], color=MODEL_COLOUR,
+                                 alpha=0.3, lw=0)
+    ax.plot(x, median, color=MODEL_COLOUR, lw=1.0, label="predictive median")
+    ax.plot(x, observed, ".", color=DATA_COLOUR, ms=1.5, label="data")
+    ax_residual.plot(x, observed - median, ".", color=DATA_COLOUR, ms=1.5)
+    ax_residual.axhline(0.0, color=MODEL_COLOUR, lw=0.8)
+    ax.set_ylabel(ylabel)
+    ax.tick_params(labelbottom=False)
+    ax_residual.set_xlabel(xlabel)
+    ax_residual.set_ylabel("data - median")
+    if title:
+        ax.set_title(title)
+
+
 __all__ = [
     "STYLE",
     "forest",
@@ -128,6 +164,7 @@ __all__ = [
     "probability_heatmap",
     "published_versus_posterior",
     "recommendation_bars",
+    "response_with_residuals",
 ]
 
 

@@ -19,6 +19,7 @@ from peano_bayes.figures import (  # noqa: E402
     material_figures,
     predictive_runs,
     published_data,
+    response_runs,
 )
 from peano_bayes.inference.results import load_result  # noqa: E402
 from peano_bayes.metrics import evaluate_result  # noqa: E402
@@ -88,10 +89,36 @@ def test_predictive_runs_of_a_result_bracket_their_median(result_dir):
         assert np.sqrt(np.mean((r["observed"] - r["median"]) ** 2)) < 0.5
 
 
+def test_response_with_residuals_bands_a_loop_branch_by_branch_and_draws_what_it_is_given():
+    strain = np.concatenate([np.linspace(0.0, 0.1, 6), np.linspace(0.1, 0.0, 6)[1:]])
+    median = 10.0 - 20.0 * strain
+    observed = median + np.linspace(-0.1, 0.1, strain.size)
+    fig, (ax, res) = plt.subplots(2, 1)
+    plots.response_with_residuals(
+        ax, res, strain, observed, median - 1, median, median + 1, xlabel="strain [-]", ylabel="force [N]"
+    )
+    assert len(ax.collections) == 2 and len(res.collections) == 2  # loading and unloading branches
+    (points,) = [line for line in res.get_lines() if line.get_marker() == "."]
+    np.testing.assert_allclose(points.get_ydata(), observed - median)
+    assert UNIT.search(res.get_xlabel()) and UNIT.search(ax.get_ylabel())
+    plt.close(fig)
+
+
+def test_response_runs_are_load_cycles_against_strain_at_each_pressure(result_dir):
+    panels = response_runs(load_result(result_dir))
+    assert [p["xlabel"] for p in panels] == ["strain [-]", "strain [-]"]
+    assert [p["title"].split(":")[0] for p in panels] == ["load cycle at 0 kPa", "load cycle at 30 kPa"]
+    for p in panels:
+        assert p["x"].shape == p["observed"].shape
+        assert len(plots._monotone_pieces(p["x"])) == 2  # stretched, then released: one loop
+
+
 def test_material_and_cross_material_figures_are_written(result_dir, tmp_path):
     written = material_figures(result_dir)
     names = sorted(p.name for p in written)
-    assert names == ["corner.pdf", "corner.png", "predictive.pdf", "predictive.png"]
+    assert names == [
+        "corner.pdf", "corner.png", "predictive.pdf", "predictive.png", "response.pdf", "response.png"
+    ]
     assert all(p.stat().st_size > 1000 for p in written)
     assert all(_is_picture(p) for p in written if p.suffix == ".png")
     assert not list((result_dir / "figures").glob(".*tmp"))  # nothing half-written left behind

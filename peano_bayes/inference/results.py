@@ -114,9 +114,11 @@ def to_inference_data(posterior: Posterior, result: SampleResult, *, seed: int, 
             "time_s": observed["time_s"],
             "count": observed["count"],
             "unit": observed["unit"],
+            "strain": observed["strain"],
+            "pressure_pa": observed["pressure_pa"],
         },
         coords={**bin_coords, "draw": draws[subset] + result.convergence.discard},
-        dims={k: ["bin"] for k in ("y", "test", "specimen", "run", "time_s", "count", "unit")},
+        dims={k: ["bin"] for k in ("y", "test", "specimen", "run", "time_s", "count", "unit", "strain", "pressure_pa")},
     )
     idata.extend(pointwise)
     idata.extend(az.from_dict(prior=prior_draws))
