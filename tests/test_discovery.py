@@ -255,6 +255,8 @@ def test_discover_cli_names_hidden_hysteresis_and_shrinks_the_gap(hysteresis_dat
     before = report["gap"]["before"]["load_cycle"]["held_out"]["rmse"]
     after = report["gap"]["after"]["load_cycle"]["held_out"]["rmse"]
     assert after <= 0.5 * before
+    final = report["gap"]["after"]["load_cycle"]["held_out"]
+    assert 0.0 <= final["excess_rmse"] < report["gap"]["before"]["load_cycle"]["held_out"]["excess_rmse"]
 
 
 def test_discover_cli_bad_input_exits_2(tmp_path, capsys):
@@ -456,6 +458,21 @@ def test_held_out_ties_within_two_standard_errors_of_block_sums():
     assert within_two_se(other + 0.05 + correlated, other, blocks)
 
 
+def test_noise_excess_is_what_the_model_misses_beyond_the_noise(rng):
+    from peano_bayes.discovery.workflow import noise_excess
+
+    floor = np.full(4000, 0.2)
+    noise = rng.normal(0.0, 0.2, 4000)
+    pure = noise_excess(noise, floor)
+    assert pure["consistent_with_noise"] and pure["excess_rmse"] < 0.05  # sqrt(2/4000)-level chance excess
+    assert pure["noise_floor_rmse"] == pytest.approx(0.2)
+    missed = noise_excess(noise + 0.3, floor)  # RMSE^2 = 0.2^2 + 0.3^2: the excess is the 0.3 N offset
+    assert missed["excess_rmse"] == pytest.approx(0.3, rel=0.05) and not missed["consistent_with_noise"]
+    smooth = noise_excess(noise + 0.1 * np.sin(np.linspace(0, 20, 4000)), floor)  # small but coherent
+    assert not smooth["consistent_with_noise"]
+    assert noise_excess(np.full(3, np.nan), np.ones(3))["consistent_with_noise"] is False
+
+
 def test_report_names_close_calls_outside_the_confusable_pairs():
     from peano_bayes.discovery.report import report_markdown
 
@@ -497,6 +514,12 @@ def test_report_names_close_calls_outside_the_confusable_pairs():
     }
     text = report_markdown(report)
     assert "predicted the held-out runs as well within two standard errors: series_compliance" in text
+    assert "residuals are consistent with noise in every" not in text and "**not** consistent" not in text
+    gap_after = {"load_cycle": {p: {**gap["load_cycle"][p], "noise_floor_rmse": 0.2, "excess_rmse": 0.5,
+                                    "consistent_with_noise": p == "fit"} for p in ("fit", "held_out")}}
+    noted = report_markdown({**report, "gap": {"before": gap, "after": gap_after}})
+    assert "| load_cycle | held-out | 1 | 1 | 0.2 | n/a | 0.5 | no |" in noted
+    assert "**not** consistent with noise in: load_cycle (held-out)" in noted
     assert "verdict stands" in text
     step["close_calls"] = []
     assert "predicted the held-out runs as well" not in report_markdown(report)

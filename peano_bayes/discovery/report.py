@@ -14,6 +14,7 @@ from ..atomic import write_text
 from ..figures import save
 from ..formatting import format_number
 from .effects import ABSORBS, CONFUSABLE, LIBRARY
+from .workflow import NOISE_CONSISTENCY_SE
 
 _UNIT = {"load_cycle": "N", "blocking": "N", "stroke": "-", "step": "-"}
 
@@ -169,19 +170,37 @@ def report_markdown(report: dict) -> str:
     lines += [
         "## Gap before and after",
         "",
-        "| test | part | RMSE base | RMSE final | max error base | max error final | unit |",
-        "|---|---|---|---|---|---|---|",
+        "*Noise floor*: the RMSE that the sensor noise alone gives (the model-free noise estimate over each bin's "
+        "samples); *excess*: sqrt(max(RMSE^2 - floor^2, 0)), what the model misses beyond the noise; *noise?*: "
+        "whether the final model's residuals are consistent with noise (mean square within "
+        f"{NOISE_CONSISTENCY_SE:g} standard errors of the floor's).",
+        "",
+        "| test | part | RMSE base | RMSE final | noise floor | excess base | excess final | noise? "
+        "| max error base | max error final | unit |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     before, after = report["gap"]["before"], report["gap"]["after"]
+    unexplained = []
     for test in before:
         for part in ("fit", "held_out"):
             b, a = before[test].get(part), after[test].get(part)
             if b is None or a is None:
                 continue
+            consistent = a.get("consistent_with_noise")
+            verdict = "-" if consistent is None else ("yes" if consistent else "no")
+            if consistent is False:
+                unexplained.append(f"{test} ({part.replace('_', '-')})")
             lines.append(
                 f"| {test} | {part.replace('_', '-')} | {format_number(b['rmse'])} | {format_number(a['rmse'])} | "
+                f"{format_number(a.get('noise_floor_rmse', float('nan')))} | "
+                f"{format_number(b.get('excess_rmse', float('nan')))} | "
+                f"{format_number(a.get('excess_rmse', float('nan')))} | {verdict} | "
                 f"{format_number(b['max_error'])} | {format_number(a['max_error'])} | {_UNIT.get(test, '')} |"
             )
+    if unexplained:
+        lines += ["", f"The final model's residuals are **not** consistent with noise in: {', '.join(unexplained)}."]
+    elif any("consistent_with_noise" in p for t in after.values() for p in t.values()):
+        lines += ["", "The final model's residuals are consistent with noise in every test."]
     lines += ["", "## Candidates screened", ""]
     for i, screened in enumerate(report["screened"], 1):
         for name, ev in screened.items():

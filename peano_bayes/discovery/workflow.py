@@ -140,10 +140,47 @@ def _rmse(a: np.ndarray) -> float:
     return float(np.sqrt(np.mean(a**2))) if a.size else float("nan")
 
 
+#: Residuals are called consistent with the noise when their mean square over the noise floor's is within this
+#: many standard errors of 1 (chi-square: sd sqrt(2 / n_eff), n_eff from the lag-one autocorrelation).
+NOISE_CONSISTENCY_SE = 3.0
+
+
+def noise_floor(data) -> np.ndarray:
+    """(n,) sd of each flat bin mean of ``data`` (a :class:`~peano_bayes.discovery.model.DiscoveryData`) from the
+    sensor noise alone, in residual order: ``data.sd``, the model-free noise sd of its test's signal per raw
+    sample (estimated from second differences before any model is fitted) over sqrt(samples in the bin)."""
+    pairs = zip(data.groups, data.sd, strict=True)
+    return np.concatenate([np.broadcast_to(np.asarray(sd, dtype=float), g.observed.shape).ravel() for g, sd in pairs])
+
+
+def noise_excess(error: np.ndarray, floor: np.ndarray) -> dict:
+    """How far residuals ``error`` (n,) [signal unit] are above their noise ``floor`` (n,): the noise floor's
+    RMSE, the **excess RMSE** sqrt(max(RMSE^2 - floor^2, 0)) (what the model misses beyond the noise, in the
+    signal's unit) and whether the residuals are consistent with noise (:data:`NOISE_CONSISTENCY_SE`)."""
+    ok = np.isfinite(error) & np.isfinite(floor) & (floor > 0)
+    if not ok.any():
+        return {"noise_floor_rmse": float("nan"), "excess_rmse": float("nan"), "consistent_with_noise": False}
+    e, f = error[ok], floor[ok]
+    ratio = float(np.mean((e / f) ** 2))
+    tolerance = NOISE_CONSISTENCY_SE * np.sqrt(2.0 / max(_n_eff(e / f), 1.0))
+    return {
+        "noise_floor_rmse": _rmse(f),
+        "excess_rmse": float(np.sqrt(max(np.mean(e**2) - np.mean(f**2), 0.0))),
+        "consistent_with_noise": bool(abs(ratio - 1.0) <= tolerance),
+    }
+
+
 def gap_table(fit_eval: Evaluation, held_eval: Evaluation, split: SplitData) -> dict:
-    """Per test and split: RMSE and max |error| [signal unit], and the standardized RMSE (1 = noise level)."""
+    """Per test and split: RMSE and max |error| [signal unit], the standardized RMSE (1 = the fitted noise
+    level), and against the model-free noise floor (:func:`noise_excess`): its RMSE, the excess RMSE and
+    whether the residuals are consistent with noise."""
     out = {}
-    for part, ev, cov in (("fit", fit_eval, split.fit_covariates), ("held_out", held_eval, split.held_out_covariates)):
+    parts = (
+        ("fit", fit_eval, split.fit_covariates, split.fit),
+        ("held_out", held_eval, split.held_out_covariates, split.held_out),
+    )
+    for part, ev, cov, data in parts:
+        floor = noise_floor(data)
         for test in np.unique(cov.test):
             rows = cov.test == test
             err = ev.error[rows]
@@ -151,6 +188,7 @@ def gap_table(fit_eval: Evaluation, held_eval: Evaluation, split: SplitData) -> 
                 "rmse": _rmse(err),
                 "max_error": float(np.nanmax(np.abs(err))),
                 "standardized_rmse": _rmse(ev.r[rows]),
+                **noise_excess(err, floor[rows]),
             }
     return out
 
