@@ -3,10 +3,11 @@ save PNG and PDF atomically.
 
 Per material (``OUT/<code>/figures/``): ``predictive`` (data over the 94 % posterior predictive band, one run
 per condition of each fitted test, against time), ``response`` (the same runs against their driving input:
-force-strain loops per pressure, blocking force and stroke against pressure, each over a residual panel) and
-``corner`` (pairs of the physical parameters, arviz). Across materials
-(``OUT/figures/``): ``forest`` (each physical parameter's posterior per material), ``published`` (posterior
-metrics against the paper's values) and ``ranking`` (P(best) per criterion).
+force-strain loops per pressure, blocking force and stroke against pressure, each over a residual panel),
+``corner`` (pairs of the physical parameters, arviz), ``trace`` and ``rank`` (per ensemble,
+:func:`diagnostic_figures`). Across materials (``OUT/figures/``): ``forest`` (each physical parameter's
+posterior per material), ``published`` (posterior metrics against the paper's values) and ``ranking`` (P(best)
+per criterion).
 """
 
 from __future__ import annotations
@@ -246,6 +247,51 @@ def material_figures(result_dir: str | Path, dataset=None) -> list[Path]:
         fig.subplots_adjust(top=0.96)  # arviz leaves matplotlib's default 12 % blank above the grid
         fig.suptitle(f"{code}: posterior of the physical parameters (SI units)", y=0.985)
         written += save(fig, result_dir / "figures" / "corner")
+    written += diagnostic_figures(idata, result_dir / "figures", code)
+    return written
+
+
+def ensemble_chains(idata) -> tuple[np.ndarray, dict, dict]:
+    """The population parameters of a result by **ensemble** (each ensemble's walkers pooled: the unit its
+    R-hat compares), for trace and rank plots: ``(draw (k,), means, pooled)``, ``means`` name ->
+    (n_ensembles, k) each ensemble's walker mean at each kept draw, ``pooled`` name -> (n_ensembles, walkers
+    k) every walker's draws per ensemble. Results written before ``n_ensembles`` was recorded are taken as four
+    ensembles when their walkers divide into four, else one."""
+    post = idata.posterior
+    chains = post.sizes["chain"]
+    n = int(post.attrs.get("n_ensembles", 4 if chains % 4 == 0 else 1))
+    means, pooled = {}, {}
+    for name in physical_names(idata):
+        by_ensemble = np.asarray(post[name].transpose("chain", "draw").values).reshape(n, chains // n, -1)
+        means[name] = by_ensemble.mean(axis=1)
+        pooled[name] = by_ensemble.reshape(n, -1)
+    return np.asarray(post["draw"].values), means, pooled
+
+
+def diagnostic_figures(idata, out_dir: Path, code: str) -> list[Path]:
+    """``trace`` (each ensemble's walker mean against the step) and ``rank`` (arviz rank histograms of every
+    walker's draws, one series per ensemble: flat when the ensembles agree) of the population parameters."""
+    draw, means, pooled = ensemble_chains(idata)
+    units = _units(idata)
+    written = []
+    with plt.rc_context(plots.STYLE):
+        fig, axes = plt.subplots(len(means), 1, figsize=(7.0, 1.25 * len(means) + 0.8), sharex=True, squeeze=False)
+        plots.ensemble_traces(axes[:, 0], draw, means, units)
+        axes[0, 0].legend(loc="upper right", ncol=len(next(iter(means.values()))), frameon=False, fontsize=7)
+        fig.suptitle(f"{code}: each ensemble's walker mean against the step", y=1.0)
+        fig.tight_layout()
+        written += save(fig, out_dir / "trace")
+        cols = min(4, len(pooled))
+        rows = -(-len(pooled) // cols)
+        axes = az.plot_rank(
+            az.from_dict(posterior=pooled), var_names=list(pooled), grid=(rows, cols), figsize=(3.0 * cols, 2.4 * rows)
+        )
+        for ax in np.ravel(axes):
+            ax.set_ylabel("ensemble")
+        fig = np.ravel(axes)[0].figure
+        fig.suptitle(f"{code}: rank plots, one series per ensemble (flat = the ensembles agree)", y=1.0)
+        fig.tight_layout()
+        written += save(fig, out_dir / "rank")
     return written
 
 
@@ -334,16 +380,24 @@ def cross_material_figures(out_dir: str | Path, results: dict, metrics: dict, ra
 
 
 def recommendation_figure(report: dict, path_stem: Path, top: int = 12) -> list[Path]:
-    """Bar chart of the ``top`` candidates' probability of meeting the requirement (a :func:`recommend` report)."""
+    """The ``top`` candidates of a :func:`~peano_bayes.recommend.recommend` report: each one's operating-force
+    margin over the requirement with its 94 % interval, and its probability of meeting every requirement."""
     shown = report["candidates"][:top]
     labels = [
         f"{c['material']} {c['n_tubes']}x {c['tube_width_mm']:g}x{c['tube_length_mm']:g} mm ({c['binding']})"
         for c in shown
     ]
+    intervals = [c.get("force_margin_interval") or [np.nan, np.nan] for c in shown]
     with plt.rc_context(plots.STYLE):
-        fig, ax = plt.subplots(figsize=(6.5, 0.32 * len(shown) + 1.2))
-        plots.recommendation_bars(
-            ax, labels, [c["probability"] for c in shown], title="Candidates (binding requirement in brackets)"
+        fig, ax = plt.subplots(figsize=(7.0, 0.32 * len(shown) + 1.3))
+        plots.force_margins(
+            ax,
+            labels,
+            [c["margin"]["force"] if "force" in c.get("margin", {}) else np.nan for c in shown],
+            [lo for lo, _ in intervals],
+            [hi for _, hi in intervals],
+            [np.nan if c.get("infeasible") else c["probability"] for c in shown],
+            title="Candidates: force margin of a new specimen (binding requirement in brackets)",
         )
         return save(fig, Path(path_stem))
 

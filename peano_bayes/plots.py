@@ -109,16 +109,48 @@ def probability_heatmap(ax, matrix, row_labels, column_labels, *, title: str = "
         ax.set_title(title)
 
 
-def recommendation_bars(ax, labels, probability, *, title: str = ""):
-    """Horizontal bars of each candidate design's probability of meeting the requirement, best on top."""
+def force_margins(ax, labels, median, low, high, probability, *, title: str = ""):
+    """One row per candidate design, best on top: its force margin over the requirement [%] at the median
+    (point) with its 94 % interval (bar), the requirement at 0, and its probability of meeting every
+    requirement written at the right (``median``, ``low``, ``high`` fractions (k,); ``probability`` (k,), NaN
+    for an infeasible candidate, whose row is drawn grey and says so)."""
     y = np.arange(len(labels))[::-1]
-    ax.barh(y, probability, color=MODEL_COLOUR)
+    median, low, high, probability = (np.asarray(a, dtype=float) for a in (median, low, high, probability))
+    feasible = np.isfinite(probability)
+    for mask, colour in ((feasible, MODEL_COLOUR), (~feasible, "0.6")):
+        if mask.any():
+            ax.errorbar(
+                100 * median[mask],
+                y[mask],
+                xerr=100 * np.abs(np.stack([median[mask] - low[mask], high[mask] - median[mask]])),
+                fmt="o",
+                color=colour,
+                ms=4,
+                capsize=2,
+            )
+    ax.axvline(0.0, color=PUBLISHED_COLOUR, lw=1.0, label="requirement")
     ax.set_yticks(y, labels)
-    ax.set_xlim(0, 1)
-    ax.set_xlabel("P(meets the requirement) [-]")
+    ax.set_xlabel("force margin over the requirement [%] (94 % interval)")
     ax.grid(axis="y", visible=False)
+    for yi, p in zip(y, probability, strict=True):
+        text = "infeasible" if not np.isfinite(p) else f"P = {p:.2f}"
+        ax.annotate(text, (1.0, yi), xycoords=("axes fraction", "data"), xytext=(4, 0), textcoords="offset points",
+                    va="center", fontsize=8)
     if title:
         ax.set_title(title)
+
+
+def ensemble_traces(axes, draw, series: dict, units: dict):
+    """One axis per parameter: each ensemble's walker mean (one line per ensemble) against ``draw`` (k,) the
+    kept draw's step; ``series``: name -> (n_ensembles, k); ``units``: name -> unit text."""
+    for ax, (name, values) in zip(axes, series.items(), strict=True):
+        for e, row in enumerate(np.asarray(values)):
+            ax.plot(draw, row, lw=0.7, alpha=0.8, label=f"ensemble {e + 1}")
+        unit = units.get(name, "")
+        ax.set_ylabel(f"[{unit}]" if unit else "[-]")
+        ax.set_title(name, fontsize=8, loc="left")
+        ax.yaxis.set_major_locator(matplotlib.ticker.MaxNLocator(3))
+    axes[-1].set_xlabel("step")
 
 
 def _monotone_pieces(x) -> list[slice]:
@@ -163,7 +195,8 @@ __all__ = [
     "predictive_band",
     "probability_heatmap",
     "published_versus_posterior",
-    "recommendation_bars",
+    "ensemble_traces",
+    "force_margins",
     "response_with_residuals",
 ]
 

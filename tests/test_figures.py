@@ -89,6 +89,31 @@ def test_predictive_runs_of_a_result_bracket_their_median(result_dir):
         assert np.sqrt(np.mean((r["observed"] - r["median"]) ** 2)) < 0.5
 
 
+def test_ensemble_chains_pool_each_ensembles_walkers():
+    import arviz as az
+
+    from peano_bayes.figures import ensemble_chains
+
+    values = np.arange(8 * 5, dtype=float).reshape(8, 5)  # 8 walkers (chains) x 5 draws
+    idata = az.from_dict(posterior={"tensile_ka_n_per_m": values})
+    idata.posterior.attrs["n_ensembles"] = 2
+    draw, means, pooled = ensemble_chains(idata)
+    np.testing.assert_array_equal(draw, np.arange(5))
+    np.testing.assert_allclose(means["tensile_ka_n_per_m"], [values[:4].mean(0), values[4:].mean(0)])
+    np.testing.assert_array_equal(pooled["tensile_ka_n_per_m"][1], values[4:].ravel())
+
+
+def test_force_margins_draw_each_candidates_interval_and_say_which_are_infeasible():
+    fig, ax = plt.subplots()
+    plots.force_margins(ax, ["a", "b"], [0.2, -0.1], [0.1, -0.3], [0.5, 0.0], [0.9, np.nan])
+    assert [t.get_text() for t in ax.texts] == ["P = 0.90", "infeasible"]
+    assert [t.get_text() for t in ax.get_yticklabels()] == ["a", "b"]
+    points = [line for line in ax.get_lines() if line.get_marker() == "o"]
+    np.testing.assert_allclose(sorted(np.concatenate([line.get_xdata() for line in points])), [-10.0, 20.0])
+    assert UNIT.search(ax.get_xlabel())
+    plt.close(fig)
+
+
 def test_response_with_residuals_bands_a_loop_branch_by_branch_and_draws_what_it_is_given():
     strain = np.concatenate([np.linspace(0.0, 0.1, 6), np.linspace(0.1, 0.0, 6)[1:]])
     median = 10.0 - 20.0 * strain
@@ -117,7 +142,8 @@ def test_material_and_cross_material_figures_are_written(result_dir, tmp_path):
     written = material_figures(result_dir)
     names = sorted(p.name for p in written)
     assert names == [
-        "corner.pdf", "corner.png", "predictive.pdf", "predictive.png", "response.pdf", "response.png"
+        "corner.pdf", "corner.png", "predictive.pdf", "predictive.png", "rank.pdf", "rank.png",
+        "response.pdf", "response.png", "trace.pdf", "trace.png",
     ]
     assert all(p.stat().st_size > 1000 for p in written)
     assert all(_is_picture(p) for p in written if p.suffix == ".png")

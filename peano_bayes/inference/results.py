@@ -148,6 +148,7 @@ def _attrs(posterior: Posterior, result: SampleResult, seed: int, extra: dict | 
             }
         ),
         "converged": int(result.convergence.converged),
+        "n_ensembles": int(result.n_ensembles),
         "units": json.dumps(
             {**dict(posterior.prior.units), **{n: "-" for n in posterior.names[posterior.prior.ndim :]}}
         ),
