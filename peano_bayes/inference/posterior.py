@@ -222,7 +222,7 @@ class Posterior:
         """``f(theta (D,)) -> (-ln p, gradient)`` of the negative log posterior, compiled once per family, with
         the fitted driving inputs treated as exact (``log_prob(..., exact_inputs=True)``). It serves the mode and
         the Laplace covariance that start the sampler, and its gradient through the input error's forward-mode
-        derivatives would cost a second-order compilation (measured on TP: 95 s against 41 s,
+        derivatives would cost a second-order compilation (measured on TP: 95-102 s against 38-41 s,
         ``experiments/bench_input_error.py``) for a start point that the overdispersed start absorbs."""
         f = self._shared(
             "value_and_grad",
