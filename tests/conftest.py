@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 from hypothesis import settings
 
-import peano_bayes.jax_config  # noqa: F401  (float64 for every test)
+from peano_bayes.jax_config import enable_compilation_cache  # also float64 for every test
+
+# One persistent compilation cache for the session, both xdist workers and the command-line subprocesses
+# (they read the same place): a program that several tests, workers or processes build identically compiles
+# once. The package's own place ($PEANO_BAYES_CACHE, else ~/.cache/peano_bayes/jax); point
+# PEANO_BAYES_CACHE at an empty directory to measure the suite cold.
+enable_compilation_cache()
 
 # Fixed examples: the same cases on every machine and every run (no example database needed).
 settings.register_profile("deterministic", derandomize=True, database=None)
