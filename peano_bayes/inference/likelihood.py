@@ -357,10 +357,10 @@ def _reduce_run(
         raw = getattr(run, name)
         if raw is not None and name in driving:
             input_sd[name] = noise_sd(raw)
-            values = raw
-            raw, segments = piecewise_linear_segments(run.time_s, values, input_sd[name])
+            denoised, segments = piecewise_linear_segments(run.time_s, raw, input_sd[name])
             if input_error and name in ERROR_INPUTS:
-                basis[name] = fit_error_basis(run.time_s, values, segments, input_sd[name])
+                basis[name] = fit_error_basis(run.time_s, raw, segments, input_sd[name])
+            raw = denoised
         fitted[name] = raw
     if per_segment is not None:
         smooth = [
@@ -393,25 +393,36 @@ def _reduce_run(
     return out
 
 
-def _shared_input_error(bases: list[dict], names: tuple[str, ...], points: int) -> dict[str, np.ndarray]:
-    """Columns (q, points) per input name of the error of the mean of ``bases``' runs' fitted inputs (each
-    run's error ``B_i a_i``, independent): the exact low-rank factor of ``sum_i B_i B_i^T / n^2``. Inputs are
-    stacked so that each column perturbs one input (zeros in the others)."""
-    n = len(bases)
-    blocks = []
-    for name in names:
-        stacked = np.concatenate([b[name] for b in bases], axis=1) / n  # (points, sum q_i)
-        if stacked.shape[1] == 0:
-            continue
-        left, values, _ = np.linalg.svd(stacked, full_matrices=False)
-        keep = values > np.sqrt(_ERROR_RANK_TOLERANCE) * max(values.max(), 1e-300)
-        blocks.append((name, (left[:, keep] * values[keep]).T))
-    q = sum(b.shape[0] for _, b in blocks)
-    out = {name: np.zeros((q, points)) for name in names}
-    row = 0
-    for name, block in blocks:
-        out[name][row : row + block.shape[0]] = block
-        row += block.shape[0]
+def _shared_input_error(bases: list[dict], name: str, points: int) -> np.ndarray:
+    """(q, points) columns of the error of the mean of the runs' fitted input ``name`` (each run's error
+    ``B_i a_i``, independent; ``bases`` hold each run's ``B_i`` (points, q_i)): the exact low-rank factor of
+    ``sum_i B_i B_i^T / n^2``."""
+    stacked = np.concatenate([b.get(name, np.zeros((points, 0))) for b in bases], axis=1) / len(bases)
+    if stacked.shape[1] == 0:
+        return np.zeros((0, points))
+    left, values, _ = np.linalg.svd(stacked, full_matrices=False)
+    keep = values > np.sqrt(_ERROR_RANK_TOLERANCE) * max(values.max(), 1e-300)
+    return (left[:, keep] * values[keep]).T
+
+
+def _group_input_error(members: list, shared: np.ndarray, n_sets: int) -> dict:
+    """Per :data:`ERROR_INPUTS` name, the (u, q, p m) error columns of each simulated input row of a group
+    (:attr:`RunGroup.strain_error`, :attr:`RunGroup.pressure_error`): each column perturbs one input, rows with
+    fewer columns are padded with zeros. ``None`` for both when the runs carry no error basis (q = 0)."""
+    points = members[0][1]["time_s"].shape[0]
+    per_set = []
+    for j in range(n_sets):
+        bases = [members[i][1]["error_basis"] for i in np.flatnonzero(shared == j)]
+        per_set.append([(name, _shared_input_error(bases, name, points)) for name in ERROR_INPUTS])
+    q = max(sum(block.shape[0] for _, block in blocks) for blocks in per_set)
+    if q == 0:
+        return {name: None for name in ERROR_INPUTS}
+    out = {name: np.zeros((n_sets, q, points)) for name in ERROR_INPUTS}
+    for j, blocks in enumerate(per_set):
+        row = 0
+        for name, block in blocks:
+            out[name][j, row : row + block.shape[0]] = block
+            row += block.shape[0]
     return out
 
 
@@ -506,22 +517,7 @@ def prepare(
 
         errors = {name: None for name in ERROR_INPUTS}
         if denoise_inputs and test in input_errors:
-            points = members[0][1]["time_s"].shape[0]
-            names = tuple(n for n in ERROR_INPUTS if any(n in red["error_basis"] for _, red in members))
-            for _, red in members:  # an input not fitted in a run (no noise): no error of its own
-                for name in names:
-                    red["error_basis"].setdefault(name, np.zeros((points, 0)))
-            per_set = [
-                _shared_input_error([members[i][1]["error_basis"] for i in np.flatnonzero(shared == j)], names, points)
-                for j in range(len(simulated))
-            ]
-            q = max([0] + [next(iter(e.values())).shape[0] for e in per_set if e])
-            for name in ERROR_INPUTS:
-                padded = np.zeros((len(simulated), q, points))
-                for j, e in enumerate(per_set):
-                    if name in e:
-                        padded[j, : e[name].shape[0]] = e[name]
-                errors[name] = padded
+            errors = _group_input_error(members, shared, len(simulated))
         groups.append(
             RunGroup(
                 test=test,
@@ -666,6 +662,11 @@ def bin_noise_sd(noise_sd, group: RunGroup):
     return noise_sd / jnp.sqrt(jnp.maximum(jnp.asarray(group.counts), 1.0))
 
 
+def _model_parameters(params) -> dict:
+    """``params`` without the noise scales and the specimen spread (what the simulation takes)."""
+    return {k: v for k, v in params.items() if k not in NOISE_PARAMETERS and k != "specimen_log_sd"}
+
+
 def group_log_likelihood(
     params,
     group: RunGroup,
@@ -683,7 +684,7 @@ def group_log_likelihood(
     integral is Gaussian)."""
     if family not in ("gaussian", "student_t"):
         raise ValueError(f"family must be 'gaussian' or 'student_t', got {family!r}")
-    model = {k: v for k, v in params.items() if k not in NOISE_PARAMETERS and k != "specimen_log_sd"}
+    model = _model_parameters(params)
     scale = bin_noise_sd(params[OBSERVED[group.test][1]], group)
     observed = jnp.asarray(group.observed)
     measured = jnp.isfinite(observed)
@@ -714,7 +715,7 @@ def whitened_residuals(
     predicted) / bin sd, or, where the fitted inputs' error enters the likelihood, the residuals of the runs
     sharing an input whitened by the Cholesky factor of their joint covariance (in run, bin order). Either way
     they are independent standard normals when the model is right, so their rms is the fit in noise units."""
-    model = {k: v for k, v in params.items() if k not in NOISE_PARAMETERS and k != "specimen_log_sd"}
+    model = _model_parameters(params)
     scale = np.asarray(bin_noise_sd(params[OBSERVED[group.test][1]], group))
     if not group.has_input_error:
         predicted, _ = predict(model, group, config=config, geometry=geometry)
