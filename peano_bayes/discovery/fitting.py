@@ -17,6 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from ..inference.fit import dense_jacobian
 from .model import (
     NAMES,
     DiscoveryData,
@@ -50,11 +51,13 @@ def _objective(u, data: DiscoveryData, mask, pinned, centre):
     return jnp.concatenate([r, noise_penalty, ridge]), solver_error
 
 
+_RESIDUALS = dense_jacobian(lambda u, args: _objective(u, *args)[0])
+
+
 @jax.jit
 def _solve(starts, masks, pinned, data: DiscoveryData):
     def one(u0, mask, pin):
-        fn = lambda u, args: _objective(u, data, mask, pin, u0)[0]  # noqa: E731
-        sol = optx.least_squares(fn, _SOLVER, u0, max_steps=MAX_STEPS, throw=False)
+        sol = optx.least_squares(_RESIDUALS, _SOLVER, u0, (data, mask, pin, u0), max_steps=MAX_STEPS, throw=False)
         residuals, solver_error = _objective(sol.value, data, mask, pin, u0)
         cost = 0.5 * jnp.sum(residuals**2)
         ok = jnp.isfinite(cost) & (solver_error <= 1.0)

@@ -31,6 +31,35 @@ DEFAULT_NOISE = {
 }
 
 
+def dense_jacobian(residuals):
+    """``residuals(u, args)`` (u (d,) -> (n,)) whose derivative in ``u`` is its forward-mode Jacobian (n, d),
+    materialized once per point; ``args`` are not differentiated.
+
+    Why: optimistix's Levenberg-Marquardt linearizes the residual function and transposes that linearization for
+    the gradient of its trust-region test. Through the physics' scans and root solves that builds the model's
+    primal, tangent and transposed programs, and compiling them dominates a fit. With the Jacobian materialized
+    by ``jax.jacfwd`` (which the solver's QR needs anyway), the transpose is a matrix's and only the tangent
+    program is built (``experiments/bench_fit_compile.py`` measures both).
+    """
+
+    @jax.custom_jvp
+    def wrapped(u, args):
+        return residuals(u, args)
+
+    @wrapped.defjvp
+    def _jvp(primals, tangents):
+        u, args = primals
+
+        def both(v):
+            r = residuals(v, args)
+            return r, r
+
+        jac, r = jax.jacfwd(both, has_aux=True)(u)
+        return r, jac @ tangents[0]
+
+    return wrapped
+
+
 @dataclass(frozen=True, eq=False)
 class FitResult:
     """Best of the multi-start least squares.
@@ -154,7 +183,7 @@ def fit(
     fixed = {k: v for k, v in fixed.items() if k not in prior.names}
     spread = _prior_spread(prior, seed)
     evaluate = _residuals_and_solver_ok(observations, prior, config, noise, spread, fixed)
-    fn = lambda u, args: evaluate(u)[0]  # noqa: E731
+    fn = dense_jacobian(lambda u, args: evaluate(u)[0])
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
 
     def one(u0):
@@ -192,4 +221,4 @@ def fit(
     )
 
 
-__all__ = ["DEFAULT_NOISE", "FitResult", "fit", "fit_quality", "residual_function"]
+__all__ = ["DEFAULT_NOISE", "FitResult", "dense_jacobian", "fit", "fit_quality", "residual_function"]

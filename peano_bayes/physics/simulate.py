@@ -115,11 +115,14 @@ class StepResult(NamedTuple):
 
 
 def _newton_steps(fn, z, iterations: int):
-    """``iterations`` Newton steps on ``fn(z) = 0``, clipped to the admissible range."""
-    for _ in range(iterations):
+    """``iterations`` Newton steps on ``fn(z) = 0``, clipped to the admissible range (a loop, not unrolled: each
+    copy of the residual in a scan's body is traced, differentiated and compiled again)."""
+
+    def newton(_, z):
         r, dr = jax.jvp(fn, (z,), (jnp.ones_like(z),))
-        z = jnp.clip(z - r / dr, *_LOG_THETA)
-    return z
+        return jnp.clip(z - r / dr, *_LOG_THETA)
+
+    return jax.lax.fori_loop(0, iterations, newton, z)
 
 
 def _bisection(residual, atol: float, increasing: bool, lower=_LOG_THETA[0], upper=_LOG_THETA[1]):
@@ -149,8 +152,9 @@ def _solve_log_theta(
     Bisection to ``atol`` in log(theta), then ``iterations`` Newton steps. ``increasing`` says whether the
     residual rises with theta. Without ``z_prev`` the bisection (optimistix) spans the whole range. With it,
     ``z_prev +- _LOCAL_HALF_WIDTH`` around the previous sample's root is tried first: between samples the
-    half-angle rarely moves by a per cent, so where that bracket holds the root a fixed number of unrolled
-    bisection steps finishes the job, which XLA fuses into straight-line code. Members whose local bracket
+    half-angle rarely moves by a per cent, so where that bracket holds the root a fixed number of bisection
+    steps (a ``fori_loop``: one copy of the residual in the program, which halves the simulations' compile time
+    against unrolled steps and runs as fast, ``experiments/bench_forward.py``) finishes the job. Members whose local bracket
     misses get the whole range from optimistix first; the others hand it an empty interval, so under ``vmap``
     its loop costs a batch something only at the samples where some member needs it.
     """
@@ -167,11 +171,13 @@ def _solve_log_theta(
         z_far = _bisection(residual, atol, increasing, lower, upper)
         lo = jnp.where(holds, near_lo, z_far - atol)
         hi = jnp.where(holds, near_hi, z_far + atol)
-        for _ in range(math.ceil(math.log2(2.0 * _LOCAL_HALF_WIDTH / atol))):
+        def halve(_, bracket):
+            lo, hi = bracket
             mid = 0.5 * (lo + hi)
             below = (residual(mid) > 0.0) == increasing  # the root lies below mid
-            hi = jnp.where(below, mid, hi)
-            lo = jnp.where(below, lo, mid)
+            return jnp.where(below, lo, mid), jnp.where(below, mid, hi)
+
+        lo, hi = jax.lax.fori_loop(0, math.ceil(math.log2(2.0 * _LOCAL_HALF_WIDTH / atol)), halve, (lo, hi))
         z_guess = 0.5 * (lo + hi)
     solve = lambda fn, z: _newton_steps(fn, z, iterations)  # noqa: E731
     return jax.lax.custom_root(residual, jax.lax.stop_gradient(z_guess), solve, lambda g, y: y / g(1.0))
