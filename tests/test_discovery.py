@@ -112,7 +112,7 @@ def test_session_baseline_adds_legendre_polynomials_of_session_time_to_the_force
     for name, value in c.items():
         x1[NAMES.index(name)] = value
     data = split.both
-    shift = np.asarray(_pointwise(x1, data)[3]) - np.asarray(_pointwise(x0, data)[3])
+    shift = np.asarray(_pointwise(x1, data).predicted) - np.asarray(_pointwise(x0, data).predicted)
     s = np.concatenate([np.ravel(a) for a in data.session])
     session_s = np.concatenate([split.fit_covariates.session_s, split.held_out_covariates.session_s])
     assert s.min() >= -1.0 and s.max() <= 1.0 and s.max() - s.min() > 1.9

@@ -22,8 +22,7 @@ from .model import (
     NAMES,
     DiscoveryData,
     ModelSpec,
-    flat_predictions,
-    pointwise_log_likelihood,
+    evaluate_flat,
     standardized,
     to_unconstrained,
     values,
@@ -77,11 +76,7 @@ def _jacobian(u, mask, pinned, data: DiscoveryData):
     return jax.jacfwd(residuals, has_aux=True)(u)
 
 
-@jax.jit
-def _pointwise(x, data: DiscoveryData):
-    r, _, solver_error = standardized(x, data)
-    predicted, error = flat_predictions(x, data)
-    return pointwise_log_likelihood(x, data), r, solver_error, predicted, error
+_pointwise = jax.jit(evaluate_flat)
 
 
 @dataclass(frozen=True, eq=False)
@@ -178,8 +173,9 @@ def gauss_newton_gain(spec: ModelSpec, start, data: DiscoveryData, current_cost:
 
 def evaluate(fit: ModelFit, split) -> tuple[Evaluation, Evaluation]:
     """Evaluate ``fit`` on the fitted and on the held-out runs of a :class:`~.data.SplitData`."""
-    loglik, r, solver_error, predicted, error = (np.asarray(a) for a in _pointwise(jnp.asarray(fit.x), split.both))
-    n, ok = split.n_fit_bins, bool(solver_error <= 1.0)
+    flat = _pointwise(jnp.asarray(fit.x), split.both)
+    loglik, r, predicted, error = (np.asarray(a) for a in (flat.loglik, flat.r, flat.predicted, flat.error))
+    n, ok = split.n_fit_bins, bool(flat.solver_error <= 1.0)
     part = lambda s: Evaluation(loglik[s], r[s], predicted[s], error[s], ok)  # noqa: E731
     return part(slice(None, n)), part(slice(n, None))
 

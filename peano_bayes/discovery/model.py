@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -163,32 +164,45 @@ def predictions(x, data: DiscoveryData):
 _LOG_2PI = math.log(2 * math.pi)
 
 
-def standardized(x, data: DiscoveryData):
-    """Flat standardized residuals (n,) (0 where unmeasured), ``log sd`` (n,) (0 where unmeasured), and the
-    largest solver error over all runs."""
-    rs, logs, errs = [], [], []
+class Flat(NamedTuple):
+    """A model evaluated on every flat bin (n,) of a :class:`DiscoveryData`, in its residual order.
+
+    ``r`` standardized residual and ``log_sd`` log bin noise sd (both 0 where unmeasured); ``predicted`` signal
+    and ``error`` observed minus predicted [signal unit] (NaN where unmeasured); ``loglik`` Gaussian
+    log-likelihood (0 where unmeasured); ``solver_error`` () the largest solver error over all runs, in units
+    of its tolerance.
+    """
+
+    r: jax.Array
+    log_sd: jax.Array
+    predicted: jax.Array
+    error: jax.Array
+    loglik: jax.Array
+    solver_error: jax.Array
+
+
+def evaluate_flat(x, data: DiscoveryData) -> Flat:
+    """Everything the fits and their scores read, from one simulation of every run at values ``x`` (d,)."""
+    rs, logs, preds, errors, measured_all, errs = [], [], [], [], [], []
     for group, (predicted, sd, error) in zip(data.groups, predictions(x, data), strict=True):
         observed = jnp.asarray(group.observed)
         measured = jnp.isfinite(observed)
         rs.append(jnp.where(measured, (jnp.where(measured, observed, 0.0) - predicted) / sd, 0.0).ravel())
         logs.append(jnp.where(measured, jnp.log(sd), 0.0).ravel())
+        preds.append(predicted.ravel())
+        errors.append((observed - predicted).ravel())
+        measured_all.append(measured.ravel())
         errs.append(jnp.max(error / SOLVER_TOLERANCE[group.test]))
-    return jnp.concatenate(rs), jnp.concatenate(logs), jnp.max(jnp.stack(errs))
+    r, log_sd, measured = jnp.concatenate(rs), jnp.concatenate(logs), jnp.concatenate(measured_all)
+    loglik = jnp.where(measured, -0.5 * r**2 - log_sd - 0.5 * _LOG_2PI, 0.0)
+    return Flat(r, log_sd, jnp.concatenate(preds), jnp.concatenate(errors), loglik, jnp.max(jnp.stack(errs)))
 
 
-def flat_predictions(x, data: DiscoveryData):
-    """Flat predicted signal (n,) and observed minus predicted (n,) [signal unit] (NaN where unmeasured)."""
-    pred = [p.ravel() for p, _, _ in predictions(x, data)]
-    obs = [jnp.asarray(g.observed).ravel() for g in data.groups]
-    predicted = jnp.concatenate(pred)
-    return predicted, jnp.concatenate(obs) - predicted
-
-
-def pointwise_log_likelihood(x, data: DiscoveryData):
-    """Gaussian log-likelihood of every flat bin (n,) (0 where unmeasured)."""
-    r, log_sd, _ = standardized(x, data)
-    measured = jnp.concatenate([jnp.isfinite(jnp.asarray(g.observed)).ravel() for g in data.groups])
-    return jnp.where(measured, -0.5 * r**2 - log_sd - 0.5 * _LOG_2PI, 0.0)
+def standardized(x, data: DiscoveryData):
+    """Flat standardized residuals (n,) (0 where unmeasured), ``log sd`` (n,) (0 where unmeasured), and the
+    largest solver error over all runs."""
+    flat = evaluate_flat(x, data)
+    return flat.r, flat.log_sd, flat.solver_error
 
 
 __all__ = [
@@ -198,9 +212,9 @@ __all__ = [
     "ModelSpec",
     "NAMES",
     "SUPERSET_CONFIG",
-    "flat_predictions",
+    "Flat",
+    "evaluate_flat",
     "model_spec",
-    "pointwise_log_likelihood",
     "predictions",
     "standardized",
     "to_unconstrained",

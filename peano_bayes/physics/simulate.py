@@ -154,9 +154,9 @@ def _solve_log_theta(
     ``z_prev +- _LOCAL_HALF_WIDTH`` around the previous sample's root is tried first: between samples the
     half-angle rarely moves by a per cent, so where that bracket holds the root a fixed number of bisection
     steps (a ``fori_loop``: one copy of the residual in the program, which halves the simulations' compile time
-    against unrolled steps and runs as fast, ``experiments/bench_forward.py``) finishes the job. Members whose local bracket
-    misses get the whole range from optimistix first; the others hand it an empty interval, so under ``vmap``
-    its loop costs a batch something only at the samples where some member needs it.
+    against unrolled steps and runs as fast, ``experiments/bench_forward.py``) finishes the job. Members whose
+    local bracket misses get the whole range from optimistix first; the others hand it an empty interval, so
+    under ``vmap`` its loop costs a batch something only at the samples where some member needs it.
     """
     if z_prev is None:
         z_guess = _bisection(residual, atol, increasing)
