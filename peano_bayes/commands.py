@@ -9,6 +9,7 @@ command exit with status 3.
 from __future__ import annotations
 
 import json
+import math
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -415,7 +416,13 @@ def metrics_command(args):
 
     if args.draws < 2:
         raise PeanoBayesInputError(f"--draws must be >= 2, got {args.draws}")
-    out = evaluate_result(args.result, n_draws=args.draws, seed=args.seed, progress=not args.no_progress)
+    out = evaluate_result(
+        args.result,
+        n_draws=args.draws,
+        seed=args.seed,
+        progress=not args.no_progress,
+        test_pressure_kpa=_pressure_kpa(args.pressure_kpa),
+    )
     print(f"{out['material']}: {out['n_draws']} posterior draws ({out['n_failed']} failed to simulate)")
     print(metrics_markdown(out["material"], out["summary"], out["published"]))
     if out["prior_only"]:
@@ -428,6 +435,19 @@ def _metrics_arguments(p):
     p.add_argument("--draws", type=int, default=100, help="posterior draws simulated (default: 100)")
     p.add_argument("--seed", type=int, default=0, help="seed of the prior draws of unfitted parameters (default: 0)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--pressure-kpa", type=float, default=None, metavar="KPA", help=_PRESSURE_HELP)
+
+
+_PRESSURE_HELP = (
+    "simulate the metrics at this pressure [kPa] instead of each material's own test pressure (written to "
+    "metrics_at_<KPA>kPa.json)"
+)
+
+
+def _pressure_kpa(value: float | None) -> float | None:
+    if value is not None and not (math.isfinite(value) and value > 0):
+        raise PeanoBayesInputError(f"--pressure-kpa must be a positive number of kPa, got {value}")
+    return value
 
 
 metrics_command.arguments = _metrics_arguments
@@ -440,15 +460,23 @@ def rank_command(args):
     from .metrics import read_metrics
     from .ranking import rank_materials, ranking_markdown
 
-    metrics = [read_metrics(path) for path in args.results]  # validate every input before writing
+    common = _pressure_kpa(args.pressure_kpa)
+    if common is not None:
+        from .metrics import evaluate_result, metrics_file
+
+        for path in args.results:  # metrics at the common pressure, simulated once per result and kept
+            if Path(path).is_dir() and not metrics_file(path, common).exists():
+                evaluate_result(path, test_pressure_kpa=common, progress=True)
+    metrics = [read_metrics(path, common) for path in args.results]  # validate every input before writing
     codes = [m["material"] for m in metrics]
     twice = sorted({c for c in codes if codes.count(c) > 1})
     if twice:
         raise PeanoBayesInputError(f"material(s) given more than once: {', '.join(twice)}")
     prior_only = {name for m in metrics for name, s in m.get("summary", {}).items() if s.get("from_prior")}
     pressures = {m["material"]: m.get("test_pressure_kpa") for m in metrics}
+    own = {m["material"]: m.get("own_test_pressure_kpa", m.get("test_pressure_kpa")) for m in metrics}
     draws = {m["material"]: m["draws"] for m in metrics}
-    report = rank_materials(draws, from_prior=prior_only, test_pressure_kpa=pressures)
+    report = rank_materials(draws, from_prior=prior_only, test_pressure_kpa=pressures, own_test_pressure_kpa=own)
     out = Path(args.out) if args.out else Path(args.results[0]).resolve().parent
     out.mkdir(parents=True, exist_ok=True)
     text = ranking_markdown(report)
@@ -463,6 +491,14 @@ def _rank_arguments(p):
     p.add_argument("results", nargs="+", metavar="RESULT", help="result directories (each with metrics.json)")
     p.add_argument(
         "--out", default=None, metavar="DIR", help="where ranking.json/.md go (default: the results' parent)"
+    )
+    p.add_argument(
+        "--pressure-kpa",
+        type=float,
+        default=None,
+        metavar="KPA",
+        help="compare every material at this pressure [kPa] (metrics simulated there once per result and kept "
+        "as metrics_at_<KPA>kPa.json; default: each at its own test pressure)",
     )
 
 

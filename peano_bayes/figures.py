@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
+import textwrap
 from pathlib import Path
 
 import arviz as az
@@ -28,6 +30,7 @@ from . import plots
 from .atomic import replacing
 from .inference.likelihood import NOISE_PARAMETERS, predict, prepare
 from .metrics import METRIC_UNITS
+from .physics import PARAMETERS
 
 QUANTILES = (0.03, 0.5, 0.97)
 SIGNAL_LABEL = {"load_cycle": "force [N]", "blocking": "force [N]", "stroke": "strain [-]", "step": "strain [-]"}
@@ -45,6 +48,20 @@ def save(fig, path_stem: Path) -> list[Path]:
         written.append(final)
     plt.close(fig)
     return written
+
+
+def parameter_label(name: str, width: int = 30) -> str:
+    """A figure title for a model parameter: its meaning from :data:`~peano_bayes.physics.PARAMETERS` without
+    parenthesized formulas, with the branch number of a numbered element, wrapped at ``width`` characters; the
+    name itself where none is registered (noise scales, spreads)."""
+    parameter = PARAMETERS.get(name)
+    if parameter is None:
+        return name
+    text = re.sub(r"\s*\([^)]*\)", "", parameter.meaning).strip()
+    branch = re.search(r"(maxwell|kelvin)(\d+)_", name)
+    if branch:
+        text += f", no. {branch.group(2)}"
+    return textwrap.fill(text[:1].upper() + text[1:], width)
 
 
 def physical_names(idata) -> list[str]:
@@ -346,10 +363,11 @@ def cross_material_figures(out_dir: str | Path, results: dict, metrics: dict, ra
     with plt.rc_context(plots.STYLE):
         forest = forest_data(results)
         if forest:
-            fig, axes = _grid(len(forest))
+            fig, axes = _grid(len(forest), height=2.8)  # two-line titles
             for ax, (name, (codes, med, low, high, unit)) in zip(axes, forest.items(), strict=True):
                 wide = min(low) > 0 and max(high) > 10 * min(low)  # a log axis only where it spans a decade
-                plots.forest(ax, codes, med, low, high, xlabel=f"[{unit}]", log=wide, title=name)
+                title = parameter_label(name)
+                plots.forest(ax, codes, med, low, high, xlabel=f"{name} [{unit}]", log=wide, title=title)
             fig.suptitle("Posterior median and 94 % HDI of each physical parameter", y=1.01)
             fig.tight_layout()
             written += save(fig, out_dir / "figures" / "forest")
@@ -405,6 +423,7 @@ def recommendation_figure(report: dict, path_stem: Path, top: int = 12) -> list[
 __all__ = [
     "cross_material_figures",
     "forest_data",
+    "parameter_label",
     "material_figures",
     "predictive_runs",
     "published_data",

@@ -31,7 +31,7 @@ import csv
 import json
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
 
@@ -242,16 +242,42 @@ def protocol_material(idata) -> str | MaterialSpec:
     )
 
 
+def at_test_pressure(protocol: str | MaterialSpec, test_pressure_pa: float | None) -> str | MaterialSpec:
+    """``protocol`` (a Table 4 code or a :class:`MaterialSpec`) with its test pressure [Pa] replaced; unchanged
+    for ``None``. Where a material's metrics are simulated away from the pressure it was tested at, they
+    extrapolate its fitted model."""
+    if test_pressure_pa is None:
+        return protocol
+    if not (math.isfinite(test_pressure_pa) and test_pressure_pa > 0):
+        raise PeanoBayesInputError(f"a test pressure must be a positive number of Pa, got {test_pressure_pa}")
+    spec = MATERIALS[protocol] if isinstance(protocol, str) else protocol
+    return replace(spec, test_pressure_pa=float(test_pressure_pa))
+
+
+def metrics_file(directory: str | Path, test_pressure_kpa: float | None = None) -> Path:
+    """Where a result's metrics live: ``metrics.json`` at its own test pressure, ``metrics_at_<P>kPa.json`` at
+    a common one."""
+    name = "metrics.json" if test_pressure_kpa is None else f"metrics_at_{test_pressure_kpa:g}kPa.json"
+    return Path(directory) / name
+
+
 def posterior_metrics(
-    idata, *, n_draws: int = 100, seed: int = 0, progress: Callable | None = None, level: str = "new_specimen"
+    idata,
+    *,
+    n_draws: int = 100,
+    seed: int = 0,
+    progress: Callable | None = None,
+    level: str = "new_specimen",
+    test_pressure_pa: float | None = None,
 ) -> PosteriorMetrics:
     """Posterior predictive Table 3 metrics of a result (``posterior.nc`` as arviz InferenceData): the paper's
     protocol simulated noise-free for ``n_draws`` posterior draws
     (:func:`~peano_bayes.inference.results.parameter_draws`), each measured as
     the rig would be (:func:`model_metrics`). ``level``: ``"new_specimen"`` (default: a muscle not yet made,
     so the intervals include the between-specimen spread) or ``"population"``. ``progress`` wraps the draw
-    iterator (e.g. ``tqdm``)."""
-    protocol = protocol_material(idata)
+    iterator (e.g. ``tqdm``). ``test_pressure_pa``: simulate the protocol at this pressure instead of the
+    material's own test pressure (to compare materials at one pressure)."""
+    protocol = at_test_pressure(protocol_material(idata), test_pressure_pa)
     config = result_config(idata)
     sets, prior_only = parameter_draws(idata, n_draws, seed, level=level)
     draws = {name: np.full(n_draws, np.nan) for name in METRIC_UNITS}
@@ -315,13 +341,21 @@ def metrics_markdown(material: str, summary: dict, comparison: list[dict]) -> st
 
 
 def evaluate_result(
-    path: str | Path, *, n_draws: int = 100, seed: int = 0, hdi_prob: float = 0.94, progress: bool = True
+    path: str | Path,
+    *,
+    n_draws: int = 100,
+    seed: int = 0,
+    hdi_prob: float = 0.94,
+    progress: bool = True,
+    test_pressure_kpa: float | None = None,
 ) -> dict:
-    """Posterior metrics of one result (``posterior.nc`` or its directory), compared with the paper, written to
-    ``metrics.json`` beside the result (atomically); returns what it wrote: ``material``,
-    ``test_pressure_kpa`` (the pressure its metrics are simulated at; ``None`` if unknown), ``n_draws``,
-    ``n_failed``, ``prior_only``, ``summary`` (:meth:`PosteriorMetrics.summary`), ``published``
-    (:func:`compare_published`) and ``draws`` (metric -> list of values, for :mod:`peano_bayes.ranking`)."""
+    """Posterior metrics of one result (``posterior.nc`` or its directory), compared with the paper, written
+    beside the result (atomically, :func:`metrics_file`); returns what it wrote: ``material``,
+    ``test_pressure_kpa`` (the pressure its metrics are simulated at; ``None`` if unknown),
+    ``own_test_pressure_kpa`` (the material's), ``n_draws``, ``n_failed``, ``prior_only``, ``summary``
+    (:meth:`PosteriorMetrics.summary`), ``published`` (:func:`compare_published`, empty away from the own test
+    pressure: the paper's values are at that pressure) and ``draws`` (metric -> list of values, for
+    :mod:`peano_bayes.ranking`). ``test_pressure_kpa``: a common pressure [kPa] instead of the material's own."""
     from tqdm.auto import tqdm
 
     from .atomic import write_text
@@ -331,30 +365,35 @@ def evaluate_result(
     n_draws = min(n_draws, total)
     material = idata.posterior.attrs["material"]
     bar = (lambda it: tqdm(it, desc=f"{material} metrics", unit="draw")) if progress else None
-    result = posterior_metrics(idata, n_draws=n_draws, seed=seed, progress=bar)
-    summary = result.summary(hdi_prob)
     spec = protocol_material(idata)
     spec = spec if isinstance(spec, MaterialSpec) else MATERIALS.get(spec)
+    own = None if spec is None else spec.test_pressure_pa / 1e3
+    common = None if test_pressure_kpa is None else float(test_pressure_kpa)
+    pressure_pa = None if common is None else 1e3 * common
+    result = posterior_metrics(idata, n_draws=n_draws, seed=seed, progress=bar, test_pressure_pa=pressure_pa)
+    summary = result.summary(hdi_prob)
     out = {
         "material": material,
-        "test_pressure_kpa": None if spec is None else spec.test_pressure_pa / 1e3,
+        "test_pressure_kpa": own if common is None else common,
+        "own_test_pressure_kpa": own,
         "n_draws": n_draws,
         "n_failed": result.n_failed,
         "prior_only": list(result.prior_only),
         "hdi_prob": hdi_prob,
         "summary": summary,
-        "published": compare_published(material, summary),
+        "published": compare_published(material, summary) if common in (None, own) else [],
         "draws": {name: [float(x) for x in values] for name, values in result.draws.items()},
     }
     directory = Path(path) if Path(path).is_dir() else Path(path).parent
-    write_text(directory / "metrics.json", json.dumps(out, indent=1, default=float))
+    write_text(metrics_file(directory, common), json.dumps(out, indent=1, default=float))
     return out
 
 
-def read_metrics(path: str | Path) -> dict:
-    """The ``metrics.json`` of a result directory (see :func:`evaluate_result`)."""
+def read_metrics(path: str | Path, test_pressure_kpa: float | None = None) -> dict:
+    """The metrics of a result directory (see :func:`evaluate_result`; :func:`metrics_file` for which file), or
+    of the metrics file ``path``."""
     path = Path(path)
-    file = path / "metrics.json" if path.is_dir() else path
+    file = metrics_file(path, test_pressure_kpa) if path.is_dir() else path
     try:
         out = json.loads(file.read_text())
     except FileNotFoundError:

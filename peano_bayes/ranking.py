@@ -175,7 +175,9 @@ def ordering_checks(draws: dict) -> list[dict]:
     return out
 
 
-def rank_materials(draws: dict, from_prior=(), test_pressure_kpa: dict | None = None) -> dict:
+def rank_materials(
+    draws: dict, from_prior=(), test_pressure_kpa: dict | None = None, own_test_pressure_kpa: dict | None = None
+) -> dict:
     """Everything :mod:`peano_bayes.ranking` computes, as plain data: ``materials``; ``criteria`` (per
     criterion: ``p_best``, ``mean_rank``, ``rank_interval`` by material, ``p_better`` matrix rows by material,
     the margin probabilities, ``n`` draws; criteria no draw defines are left out); ``pareto`` (P(Pareto-optimal)
@@ -184,7 +186,9 @@ def rank_materials(draws: dict, from_prior=(), test_pressure_kpa: dict | None = 
     metrics the data did not inform in some material (e.g. the step metrics of fits without the step test):
     they are **not ranked**, since their draws are the prior's and a ranking of them would rank the priors.
     ``test_pressure_kpa``: code -> the pressure each material's metrics were simulated at (each at its own test
-    pressure); kept in the report so that :func:`ranking_markdown` can say when they differ."""
+    pressure, or all at a common one); kept in the report so that :func:`ranking_markdown` can say when they
+    differ. ``own_test_pressure_kpa``: code -> the pressure each material was tested at, where the metrics were
+    simulated at a common pressure instead."""
     materials = tuple(draws)
     from_prior = set(from_prior)
     criteria = {}
@@ -232,6 +236,7 @@ def rank_materials(draws: dict, from_prior=(), test_pressure_kpa: dict | None = 
         "orderings": orderings,
         "left_out": left_out,
         "test_pressure_kpa": dict(test_pressure_kpa or {}),
+        "own_test_pressure_kpa": dict(own_test_pressure_kpa or test_pressure_kpa or {}),
     }
 
 
@@ -248,7 +253,18 @@ def ranking_markdown(report: dict) -> str:
         "",
     ]
     pressures = {c: p for c, p in report.get("test_pressure_kpa", {}).items() if p is not None}
-    if len(set(pressures.values())) > 1:
+    own = report.get("own_test_pressure_kpa", pressures)
+    away = {c: own[c] for c, p in pressures.items() if own.get(c) is not None and own[c] != p}
+    if away:
+        common = sorted(set(pressures.values()))
+        listed = "; ".join(f"{c} at {p:g} kPa" for c, p in away.items())
+        lines += [
+            f"*Compared at a common pressure* ({', '.join(f'{p:g}' for p in common)} kPa). Tested elsewhere: "
+            f"{listed}; their metrics here are their fitted models simulated away from the pressure their data "
+            "cover, an extrapolation the data do not check.",
+            "",
+        ]
+    elif len(set(pressures.values())) > 1:
         groups = {}
         for code, p in pressures.items():
             groups.setdefault(p, []).append(code)

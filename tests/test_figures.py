@@ -17,6 +17,7 @@ from peano_bayes.figures import (  # noqa: E402
     cross_material_figures,
     forest_data,
     material_figures,
+    parameter_label,
     predictive_runs,
     published_data,
     response_runs,
@@ -166,6 +167,18 @@ def test_material_and_cross_material_figures_are_written(result_dir, tmp_path):
         f"{stem}.{ext}" for stem in ("forest", "published", "ranking") for ext in ("png", "pdf")
     )
     assert all(_is_picture(p) for p in out if p.suffix == ".png")
+
+
+def test_parameter_labels_are_short_wrapped_descriptions_not_names():
+    from peano_bayes.physics import PARAMETERS
+
+    labels = {name: parameter_label(name) for name in PARAMETERS}
+    assert len(set(labels.values())) == len(labels)  # every parameter told apart
+    for name, label in labels.items():
+        assert label != name and all(len(line) <= 30 for line in label.splitlines()), label
+    assert parameter_label("bending_k1_n") == "Bending stiffness, constant\npart"
+    assert parameter_label("parallel_maxwell2_tau_s") == "Maxwell branch relaxation\ntime, no. 2"
+    assert parameter_label("noise_stroke_strain") == "noise_stroke_strain"  # not a model parameter: its name
 
 
 @pytest.mark.parametrize("builder", [forest_data, published_data])

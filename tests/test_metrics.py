@@ -134,3 +134,20 @@ def test_metrics_command_writes_metrics_json(result_dir, capsys):
     assert report["material"] == written["material"] == "TP" and written["n_draws"] == 3
     assert any(row["metric"] == "hysteresis_loss" for row in written["published"])
     assert "| metric | unit | median |" in captured.err  # the table a person reads, on stderr under --json
+
+
+def test_metrics_at_a_common_pressure_go_to_their_own_file_and_follow_the_pressure(result_dir, capsys):
+    """The same posterior draws (same seed) simulated at twice the test pressure: each draw's free strain rises
+    (the pressure opens the tubes further), the file says which pressure, and the paper's values (given at the
+    test pressure) are not compared."""
+    assert main(["metrics", str(result_dir), "--draws", "3", "--no-progress", "--json", "--pressure-kpa", "60"]) == 0
+    capsys.readouterr()
+    at_60 = json.loads((result_dir / "metrics_at_60kPa.json").read_text())
+    assert at_60["test_pressure_kpa"] == 60.0 and at_60["own_test_pressure_kpa"] == 30.0 and at_60["published"] == []
+    from peano_bayes.metrics import evaluate_result
+
+    own = evaluate_result(result_dir, n_draws=3, progress=False)
+    assert own["test_pressure_kpa"] == own["own_test_pressure_kpa"] == 30.0 and own["published"]
+    assert np.all(np.asarray(at_60["draws"]["free_strain"]) > np.asarray(own["draws"]["free_strain"]))
+    assert main(["metrics", str(result_dir), "--pressure-kpa", "-5", "--no-progress"]) == 2
+    assert "--pressure-kpa must be a positive number of kPa, got -5" in capsys.readouterr().err

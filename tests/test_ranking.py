@@ -119,3 +119,12 @@ def test_ranking_says_when_materials_were_tested_at_different_pressures(rng):
     same = ranking_markdown(rank_materials(draws, test_pressure_kpa={"TP": 30.0, "FC": 30.0, "P": 30.0}))
     unknown = ranking_markdown(rank_materials(draws))
     assert "Test pressures differ" not in same and "Test pressures differ" not in unknown
+    common = ranking_markdown(
+        rank_materials(
+            draws,
+            test_pressure_kpa={"TP": 100.0, "FC": 100.0, "P": 100.0},
+            own_test_pressure_kpa={"TP": 30.0, "FC": 200.0, "P": 100.0},
+        )
+    )
+    assert "*Compared at a common pressure* (100 kPa). Tested elsewhere: TP at 30 kPa; FC at 200 kPa;" in common
+    assert " P at " not in common and "Test pressures differ" not in common  # P was tested at 100 kPa
