@@ -95,14 +95,17 @@ def _prior_spread(prior: Prior, seed: int) -> jnp.ndarray:
 
 
 def _residuals_and_solver_ok(observations: Observations, prior: Prior, config: ModelConfig, noise, spread, fixed):
-    """``evaluate(u) -> (residuals (n,), solver_ok)``: the weighted residuals and whether every simulation met
-    its solver tolerance (:data:`SOLVER_TOLERANCE`), from one simulation."""
+    """``evaluate(u, groups) -> (residuals (n,), solver_ok)``: the weighted residuals of the run ``groups``
+    (those of ``observations`` or others of the same shapes) and whether every simulation met its solver
+    tolerance (:data:`SOLVER_TOLERANCE`), from one simulation. The groups are an argument, not a constant of
+    the compiled program, so materials whose data shapes and prior agree share one program through the
+    persistent compilation cache."""
     centre = prior.median_unconstrained()
 
-    def evaluate(u):
+    def evaluate(u, groups):
         params = {**fixed, **prior.from_unconstrained(u)}
         parts, ok = [], jnp.asarray(True)
-        for group in observations.groups:
+        for group in groups:
             predicted, errors = predict(params, group, config=config, geometry=observations.geometry)
             scale = bin_noise_sd(noise[OBSERVED[group.test][1]], group)
             observed = jnp.asarray(group.observed)
@@ -118,16 +121,27 @@ def _residuals_and_solver_ok(observations: Observations, prior: Prior, config: M
 def residual_function(observations: Observations, prior: Prior, config: ModelConfig, noise, spread, fixed):
     """``fn(u, args) -> residuals (n,)`` for optimistix, over the parameters of ``prior`` (the rest ``fixed``)."""
     evaluate = _residuals_and_solver_ok(observations, prior, config, noise, spread, fixed)
-    return lambda u, args: evaluate(u)[0]
+    return lambda u, args: evaluate(u, observations.groups)[0]
 
 
-def fit_quality(params, observations: Observations, config: ModelConfig) -> dict:
-    """Per test: RMSE, max |error| (in the observed signal's unit) and R^2 over the binned data."""
+def _predicted(params, observations: Observations, config: ModelConfig) -> list[np.ndarray]:
+    """Each group's predicted signal at ``params``, from one compiled program over all groups (the groups are
+    its argument, so another material's data of the same shapes reuses it through the persistent cache);
+    evaluated op by op, each simulation's scan and root solve would compile on its own."""
+    run = jax.jit(
+        lambda p, groups: [predict(p, g, config=config, geometry=observations.geometry)[0] for g in groups]
+    )
+    return [np.asarray(x) for x in run({k: jnp.asarray(v) for k, v in params.items()}, observations.groups)]
+
+
+def fit_quality(params, observations: Observations, config: ModelConfig, predicted=None) -> dict:
+    """Per test: RMSE, max |error| (in the observed signal's unit) and R^2 over the binned data. ``predicted``:
+    each group's prediction at ``params``, if already computed."""
     quality = {}
-    for group in observations.groups:
-        predicted, _ = predict(params, group, config=config, geometry=observations.geometry)
+    predicted = _predicted(params, observations, config) if predicted is None else predicted
+    for group, prediction in zip(observations.groups, predicted, strict=True):
         observed = np.asarray(group.observed)
-        error = (observed - np.asarray(predicted))[np.isfinite(observed)]
+        error = (observed - prediction)[np.isfinite(observed)]
         values = observed[np.isfinite(observed)]
         entry = quality.setdefault(group.test, {"errors": [], "values": []})
         entry["errors"].append(error)
@@ -146,12 +160,12 @@ def fit_quality(params, observations: Observations, config: ModelConfig) -> dict
     return out
 
 
-def _noise_from_residuals(params, observations: Observations, config: ModelConfig) -> dict:
-    """Per raw sample: sqrt(mean(count * error^2)) over each noise parameter's tests."""
+def _noise_from_residuals(observations: Observations, predicted) -> dict:
+    """Per raw sample: sqrt(mean(count * error^2)) over each noise parameter's tests; ``predicted``: each
+    group's prediction."""
     sums: dict[str, list] = {}
-    for group in observations.groups:
-        predicted, _ = predict(params, group, config=config, geometry=observations.geometry)
-        error = np.asarray(group.observed) - np.asarray(predicted)
+    for group, prediction in zip(observations.groups, predicted, strict=True):
+        error = np.asarray(group.observed) - prediction
         ok = np.isfinite(error)
         sums.setdefault(OBSERVED[group.test][1], []).append((group.counts * error**2)[ok])
     return {k: float(np.sqrt(np.mean(np.concatenate(v)))) for k, v in sums.items()}
@@ -183,27 +197,29 @@ def fit(
     fixed = {k: v for k, v in fixed.items() if k not in prior.names}
     spread = _prior_spread(prior, seed)
     evaluate = _residuals_and_solver_ok(observations, prior, config, noise, spread, fixed)
-    fn = dense_jacobian(lambda u, args: evaluate(u)[0])
+    fn = dense_jacobian(lambda u, groups: evaluate(u, groups)[0])
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
 
-    def one(u0):
-        sol = optx.least_squares(fn, solver, u0, max_steps=max_steps, throw=False)
-        r, solver_ok = evaluate(sol.value)
+    def one(u0, groups):
+        sol = optx.least_squares(fn, solver, u0, groups, max_steps=max_steps, throw=False)
+        r, solver_ok = evaluate(sol.value, groups)
         cost = 0.5 * jnp.sum(r**2)
         # A point where the physics solver misses its tolerance has likelihood zero (see likelihood.py).
         ok = jnp.isfinite(cost) & solver_ok
         return sol.value, ok, sol.result == optx.RESULTS.successful, jnp.where(ok, cost, jnp.inf)
 
     starts = np.vstack([np.asarray(prior.median_unconstrained())[None], prior.sample(seed, n_starts - 1)])
-    values, ok, converged, costs = jax.jit(jax.vmap(one))(jnp.asarray(starts))
+    groups = observations.groups
+    values, ok, converged, costs = jax.jit(jax.vmap(one, in_axes=(0, None)))(jnp.asarray(starts), groups)
     costs = np.asarray(costs)
     best = int(np.argmin(costs))
     if not np.isfinite(costs[best]):
         raise RuntimeError(f"all {n_starts} least-squares starts failed (non-finite, or the physics solver missed)")
     u = np.asarray(values[best])
-    jac = np.asarray(jax.jacfwd(lambda v: fn(v, None))(jnp.asarray(u)))
+    jac = np.asarray(jax.jit(jax.jacfwd(fn))(jnp.asarray(u), groups))  # one program, not op by op
     covariance = np.linalg.pinv(jac.T @ jac)
     params = {k: float(v) for k, v in {**fixed, **prior.from_unconstrained(u)}.items()}
+    predicted = _predicted(params, observations, config)
     return FitResult(
         names=prior.names,
         u=u,
@@ -215,8 +231,8 @@ def fit(
         n_step_limit=int(np.sum(np.asarray(ok) & ~np.asarray(converged))),
         start_costs=costs,
         noise=noise,
-        noise_estimate=_noise_from_residuals(params, observations, config),
-        quality=fit_quality(params, observations, config),
+        noise_estimate=_noise_from_residuals(observations, predicted),
+        quality=fit_quality(params, observations, config, predicted),
         seconds=time.perf_counter() - start_time,
     )
 
