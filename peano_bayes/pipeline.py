@@ -224,9 +224,9 @@ def infer(
             f"{laplace.log_prob:.1f}" + (f" ({laplace.status})" if laplace.status else "")
         )
     t0 = time.perf_counter()
-    warm = np.tile(centre, (n_walkers, 1))
-    posterior.batched(warm)
-    posterior.batched(warm[: n_walkers // 2])
+    # Every batch in calls of half an ensemble (what emcee's red-blue moves evaluate): one compilation.
+    posterior = posterior.with_batch_rows(max(1, n_walkers // 2))
+    posterior.batched(np.tile(centre, (n_walkers // 2 or 1, 1)))
     timings["compile_s"] = time.perf_counter() - t0
     result = sample(
         posterior,

@@ -138,6 +138,27 @@ def test_denoised_inputs_bring_stroke_residuals_down_to_the_sensor_noise():
     assert prepare(data).groups[0].time_s.shape[0] == 1  # three repeats share one simulation
 
 
+def test_batches_in_fixed_rows_equal_one_call_and_compile_once(stroke_data):
+    """with_batch_rows pads and splits any batch into calls of one size: the same values as one call per
+    batch, one compiled program for every batch size."""
+    post = build_posterior(prepare(stroke_data), prior_for("TP"))
+    rng = np.random.default_rng(3)
+    theta = np.zeros((7, post.ndim))
+    theta[:, : post.prior.ndim] = np.asarray(post.prior.median_unconstrained()) + 0.05 * rng.standard_normal(
+        (7, post.prior.ndim)
+    )
+    whole = post.batched(theta)
+    rows = post.with_batch_rows(3)
+    assert rows._compiled is post._compiled
+    f = rows._shared("batched", None)
+    before = f._cache_size()
+    for n in (7, 3, 2, 1):
+        np.testing.assert_allclose(rows.batched(theta[:n]), whole[:n], rtol=1e-12)
+    assert f._cache_size() == before + 1  # the (3, D) program only, whatever the batch
+    with pytest.raises(ValueError, match="batch_rows must be >= 1"):
+        post.with_batch_rows(0)
+
+
 def test_compiled_functions_are_shared_with_new_data_only(stroke_data):
     """with_observations reuses the compiled log posterior on other data of the protocol; any other change
     (here the likelihood family) gets its own, so it never evaluates the old posterior."""

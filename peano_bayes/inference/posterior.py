@@ -73,7 +73,10 @@ class Posterior:
     """Log posterior of one dataset. Build with :func:`build_posterior`.
 
     **Fields:** ``prior`` over the sampled parameters; ``observations``; ``config``; ``fixed`` values of the
-    model parameters not sampled [SI]; ``family`` of the likelihood.
+    model parameters not sampled [SI]; ``family`` of the likelihood; ``batch_rows``: the number of parameter
+    points per call of the compiled batched log posterior (:attr:`batched` pads and splits every batch into
+    calls of this size, so one compilation serves every batch size; ``None``: one call, and one compilation, per
+    batch size).
     """
 
     prior: Prior
@@ -81,6 +84,7 @@ class Posterior:
     config: ModelConfig
     fixed: dict
     family: str = "gaussian"
+    batch_rows: int | None = None
     # Compiled functions, shared (by reference) only with the posteriors made by :meth:`with_observations`;
     # any other ``dataclasses.replace`` (another prior, fixed values or family) starts an empty one.
     _compiled: dict = field(default_factory=dict, repr=False, init=False)
@@ -210,12 +214,27 @@ class Posterior:
         """``f(thetas (n, D)) -> (n,)`` numpy log posterior, jit+vmap (one compilation per batch size, shared
         with every posterior from :meth:`with_observations`)."""
         f = self._shared("batched", lambda: jax.jit(jax.vmap(self.log_prob, in_axes=(0, None))))
-        groups = self.observations.groups
+        groups, rows = self.observations.groups, self.batch_rows
 
         def call(thetas):
-            return np.asarray(f(jnp.asarray(thetas, dtype=jnp.float64), groups))
+            thetas = np.asarray(thetas, dtype=np.float64)
+            n = thetas.shape[0]
+            if not rows or n == rows:
+                return np.asarray(f(jnp.asarray(thetas), groups))
+            padded = np.concatenate([thetas, np.repeat(thetas[-1:], -n % rows, axis=0)])
+            parts = [np.asarray(f(jnp.asarray(padded[i : i + rows]), groups)) for i in range(0, len(padded), rows)]
+            return np.concatenate(parts)[:n]
 
         return call
+
+    def with_batch_rows(self, rows: int | None) -> Posterior:
+        """This posterior evaluating batches in calls of ``rows`` points (see ``batch_rows``); the compiled
+        functions are shared (the batch size is not part of them)."""
+        if rows is not None and rows < 1:
+            raise ValueError(f"batch_rows must be >= 1, got {rows}")
+        other = dataclasses.replace(self, batch_rows=rows)
+        object.__setattr__(other, "_compiled", self._compiled)
+        return other
 
     @property
     def value_and_grad(self):
