@@ -138,6 +138,24 @@ def test_denoised_inputs_bring_stroke_residuals_down_to_the_sensor_noise():
     assert prepare(data).groups[0].time_s.shape[0] == 1  # three repeats share one simulation
 
 
+def test_fit_quality_reads_a_two_specimen_posteriors_parameters(stroke_data):
+    """The posterior mean's fit quality (what every fit reports) takes the specimen offsets of a hierarchy, a
+    mapping inside the parameters, and agrees with the prediction it is computed from."""
+    from peano_bayes.inference.fit import fit_quality
+
+    post = build_posterior(prepare(stroke_data), prior_for("TP"))
+    theta = np.zeros(post.ndim)
+    theta[: post.prior.ndim] = np.asarray(post.prior.median_unconstrained())
+    params = post.params(theta)
+    assert isinstance(params["specimen_log_offset"], dict)
+    quality = fit_quality(params, post.observations, post.config)
+    group = post.observations.groups[0]
+    predicted, _ = predict(params, group, config=post.config, geometry=post.observations.geometry)
+    error = (np.asarray(group.observed) - np.asarray(predicted))[np.isfinite(group.observed)]
+    assert set(quality) == {"stroke"}
+    assert quality["stroke"]["rmse"] == pytest.approx(float(np.sqrt(np.mean(error**2))), rel=1e-9)
+
+
 def test_batches_in_fixed_rows_equal_one_call_and_compile_once(stroke_data):
     """with_batch_rows pads and splits any batch into calls of one size: the same values as one call per
     batch, one compiled program for every batch size."""

@@ -131,7 +131,7 @@ def _predicted(params, observations: Observations, config: ModelConfig) -> list[
     run = jax.jit(
         lambda p, groups: [predict(p, g, config=config, geometry=observations.geometry)[0] for g in groups]
     )
-    return [np.asarray(x) for x in run({k: jnp.asarray(v) for k, v in params.items()}, observations.groups)]
+    return [np.asarray(x) for x in run(jax.tree_util.tree_map(jnp.asarray, params), observations.groups)]
 
 
 def fit_quality(params, observations: Observations, config: ModelConfig, predicted=None) -> dict:
