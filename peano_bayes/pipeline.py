@@ -225,8 +225,9 @@ def infer(
         )
     t0 = time.perf_counter()
     # Every batch in calls of half an ensemble (what emcee's red-blue moves evaluate): one compilation.
-    posterior = posterior.with_batch_rows(max(1, n_walkers // 2))
-    posterior.batched(np.tile(centre, (n_walkers // 2 or 1, 1)))
+    rows = max(1, n_walkers // 2)
+    posterior = posterior.with_batch_rows(rows)
+    posterior.batched(np.tile(centre, (rows, 1)))
     timings["compile_s"] = time.perf_counter() - t0
     result = sample(
         posterior,
