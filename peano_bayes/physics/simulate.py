@@ -2,7 +2,7 @@
 
 Every function is ``jit``-, ``vmap``- and ``grad``-able in ``params`` (a dict of named scalars, see
 :data:`peano_bayes.physics.model.PARAMETERS`). Each time step solves one monotone scalar equation for the tube
-half-angle: bisection (``optimistix``) in log(theta), over a narrow bracket around the previous sample's root when
+half-angle: bisection in log(theta), over a narrow bracket around the previous sample's root when
 it holds the root and over the whole range otherwise, then Newton, with implicit-function gradients
 (``jax.lax.custom_root``). Newton alone from a warm start fails in corners of the parameter box (very stiff
 stiffening springs, friction at rest, ramps from 0 kPa where the half-angle changes by decades): the bracket comes
@@ -18,7 +18,6 @@ from typing import NamedTuple
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import optimistix as optx
 
 from .geometry import PAPER_GEOMETRY, Geometry
 from .model import (
@@ -39,6 +38,7 @@ _LOG_THETA = (float(jnp.log(THETA_MIN)), float(jnp.log(THETA_MAX)))
 QUASI_STATIC_ITERATIONS = 3
 DYNAMIC_ITERATIONS = 5
 COLD_START_ITERATIONS = 4
+_BISECTION_MAX_STEPS = 256
 _BRACKET_ATOL = 1e-3
 _LOCAL_HALF_WIDTH = 0.01
 #: The step test's residual (the inertial term m/dt^2 makes it steep) and the sub-micrometre smoothing of
@@ -126,22 +126,30 @@ def _newton_steps(fn, z, iterations: int):
 
 
 def _bisection(residual, atol: float, increasing: bool, lower=_LOG_THETA[0], upper=_LOG_THETA[1]):
-    """Bracketed bisection (optimistix) over ``[lower, upper]`` in log(theta), by default the whole range.
+    """Bracketed bisection over ``[lower, upper]`` in log(theta), by default the whole range; the midpoint of
+    the last interval, once it is narrower than ``atol`` (at most ``_BISECTION_MAX_STEPS`` halvings).
 
     The orientation is known (no detection), so a root beyond the range converges to its nearest end:
-    an ideal muscle with no bending reaches its free strain only at theta = pi/2. Bisection needs only the
-    sign; optimistix also stops only once ``|f| < atol``, a test in the residual's own units (N or m), so the
-    residual is replaced by its sign times ``atol / 2`` and the interval width alone decides.
+    an ideal muscle with no bending reaches its free strain only at theta = pi/2. Only the residual's sign is
+    read, so no tangent flows through the loop. The first step always evaluates the midpoint (an empty
+    interval costs one residual), as optimistix's ``Bisection`` does; this is a ``lax.while_loop`` of our own
+    rather than ``optimistix.root_find`` because the latter's implicit-function rule is traced under every
+    derivative of the simulation and puts a host callback (a runtime check) into the program, which bars it
+    from the persistent compilation cache and costs seconds of tracing per simulation.
     """
-    sol = optx.root_find(
-        lambda z, _: 0.5 * atol * jnp.sign(residual(z)),
-        optx.Bisection(rtol=0.0, atol=atol, flip=not increasing),
-        jnp.asarray(0.5 * (lower + upper)),
-        options=dict(lower=lower, upper=upper),
-        max_steps=256,
-        throw=False,
-    )
-    return sol.value
+    lower, upper = jnp.asarray(lower), jnp.asarray(upper)
+
+    def unfinished(carry):
+        lo, hi, _, k = carry
+        return ((k == 0) | (jnp.abs(hi - lo) >= atol)) & (k < _BISECTION_MAX_STEPS)
+
+    def halve(carry):
+        lo, hi, z, k = carry
+        root_above = (residual(z) < 0.0) == increasing
+        lo, hi = jnp.where(root_above, z, lo), jnp.where(root_above, hi, z)
+        return lo, hi, lo + 0.5 * (hi - lo), k + 1
+
+    return jax.lax.while_loop(unfinished, halve, (lower, upper, 0.5 * (lower + upper), 0))[2]
 
 
 def _solve_log_theta(
@@ -150,12 +158,12 @@ def _solve_log_theta(
     """Root of a monotone ``residual(log theta)``, with implicit-function gradients.
 
     Bisection to ``atol`` in log(theta), then ``iterations`` Newton steps. ``increasing`` says whether the
-    residual rises with theta. Without ``z_prev`` the bisection (optimistix) spans the whole range. With it,
+    residual rises with theta. Without ``z_prev`` the bisection (:func:`_bisection`) spans the whole range. With it,
     ``z_prev +- _LOCAL_HALF_WIDTH`` around the previous sample's root is tried first: between samples the
     half-angle rarely moves by a per cent, so where that bracket holds the root a fixed number of bisection
     steps (a ``fori_loop``: one copy of the residual in the program, which halves the simulations' compile time
     against unrolled steps and runs as fast, ``experiments/bench_forward.py``) finishes the job. Members whose
-    local bracket misses get the whole range from optimistix first; the others hand it an empty interval, so
+    local bracket misses get the whole range from :func:`_bisection` first; the others hand it an empty interval, so
     under ``vmap`` its loop costs a batch something only at the samples where some member needs it.
     """
     if z_prev is None:
