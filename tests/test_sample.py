@@ -228,6 +228,9 @@ def test_convergence_of_a_chain_with_a_walker_that_never_moved_is_a_verdict_not_
 
 
 @pytest.mark.slow
+# The notebook's fast setting fits the same shapes (two TP load cycles, 16 walkers): in one group, whichever runs
+# second reads the other's compiled programs from the persistent cache.
+@pytest.mark.xdist_group("fit_tp_two_cycles")
 def test_killed_fit_resumes_without_losing_a_chunk(tmp_path):
     from peano_bayes.data import save
     from peano_bayes.rig import simulate_dataset
@@ -248,15 +251,15 @@ def test_killed_fit_resumes_without_losing_a_chunk(tmp_path):
         "--starts",
         "2",
         "--walkers",
-        "20",
+        "16",
         "--ensembles",
         "2",
         "--chunk",
         "40",
         "--max-steps",
-        "240",
+        "160",
         "--warmup",
-        "120",  # three rounds of 40: every saved state is at a multiple of --chunk
+        "80",  # two rounds of 40: every saved state is at a multiple of --chunk
         "--no-progress",
         "--no-figures",  # report_results below draws them once
         "--seed",
@@ -276,16 +279,16 @@ def test_killed_fit_resumes_without_losing_a_chunk(tmp_path):
     finally:
         if proc.poll() is None:
             proc.kill()
-    assert 40 <= saved < 240
+    assert 40 <= saved < 160
     assert not (out / "TP" / "summary.json").exists() and not (out / "TP" / "posterior.nc").exists()
     saved_now = load_state(state)[0].shape[0]  # what the killed process had finished
     done = subprocess.run(cmd + ["--resume", "--json"], capture_output=True, text=True, env=env, timeout=900)
     summary = json.loads((out / "TP" / "summary.json").read_text())
-    # exit 3: finished unconverged (at 240 steps it may not have converged), results written and marked so
+    # exit 3: finished unconverged (at 160 steps it may not have converged), results written and marked so
     expected = 0 if summary["convergence"]["converged"] else 3
     assert done.returncode == expected, done.stdout[-2000:] + done.stderr[-2000:]
     report = json.loads(done.stdout)  # --json: stdout holds the JSON object alone, the log goes to stderr
-    assert report["steps"] == 240 and report["converged"] == summary["convergence"]["converged"]
+    assert report["steps"] == 160 and report["converged"] == summary["convergence"]["converged"]
     assert summary["resumed_from_step"] == saved_now and saved_now % 40 == 0
     assert f"resumed from {state} at step {saved_now}" in done.stderr
     assert (out / "TP" / "posterior.nc").exists()
@@ -293,11 +296,11 @@ def test_killed_fit_resumes_without_losing_a_chunk(tmp_path):
     # leaves none.
     assert state.exists() != summary["convergence"]["converged"]
     if state.exists():
-        more = cmd[: cmd.index("--max-steps") + 1] + ["280"] + cmd[cmd.index("--max-steps") + 2 :]
+        more = cmd[: cmd.index("--max-steps") + 1] + ["200"] + cmd[cmd.index("--max-steps") + 2 :]
         extended = subprocess.run(more + ["--resume", "--json"], capture_output=True, text=True, env=env, timeout=900)
         assert extended.returncode in (0, 3), extended.stdout[-2000:] + extended.stderr[-2000:]
-        assert json.loads(extended.stdout)["steps"] == 280
-        assert json.loads((out / "TP" / "summary.json").read_text())["resumed_from_step"] == 240
+        assert json.loads(extended.stdout)["steps"] == 200
+        assert json.loads((out / "TP" / "summary.json").read_text())["resumed_from_step"] == 160
     # The result file: all six groups, provenance attrs, pointwise arrays aligned with the observed bins.
     import arviz as az
 
