@@ -259,7 +259,7 @@ def test_killed_fit_resumes_without_losing_a_chunk(tmp_path):
         "--max-steps",
         "160",
         "--warmup",
-        "80",  # two rounds of 40: every saved state is at a multiple of --chunk
+        "120",  # three rounds of 40, then one chunk: every saved state is at a multiple of --chunk
         "--no-progress",
         "--no-figures",  # report_results below draws them once
         "--seed",
