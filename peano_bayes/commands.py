@@ -258,6 +258,12 @@ def _sampling_arguments(p):
         action="store_true",
         help="also sample the shape constants held at nominal by default (slow mixing; see docs/inference.md)",
     )
+    p.add_argument(
+        "--discover",
+        action="store_true",
+        help="run discovery on the data first and sample the configured model plus the physics effects it "
+        "names (report in <out>/<label>/discovery/; see docs/discovery.md)",
+    )
 
 
 def _check_sampling(args):
@@ -281,6 +287,7 @@ def _check_sampling(args):
         warmup=args.warmup,
         progress=not args.no_progress,
         sample_all=args.sample_all,
+        discover=args.discover,
     )
 
 
@@ -295,6 +302,7 @@ def _report(summary: dict) -> dict:
         "max_rhat": max(conv["rhat"].values()),
         "min_ess_bulk": min(conv["ess_bulk"].values()),
         "timings_s": summary["timings_s"],
+        "model": summary.get("model"),
     }
 
 

@@ -35,7 +35,7 @@ from .inference.fit import fit, fit_quality
 from .inference.laplace import posterior_mode
 from .inference.likelihood import prepare
 from .inference.posterior import CONTRAST_PREFIX, DEFAULT_HELD, SPECIMEN_SD, build_posterior
-from .inference.priors import load_prior, prior_for
+from .inference.priors import load_prior
 from .inference.results import (
     NEW_SPECIMEN_PREFIX,
     parameter_table,
@@ -64,13 +64,14 @@ def _select_tests(dataset: Dataset, tests) -> Dataset:
 
 
 def _prior_of(dataset: Dataset, prior: str | Path | None):
-    """The prior of a fit: ``prior`` (file or code) if given, else the bundled prior of the material code."""
+    """The whole prior of a fit (every parameter; :meth:`~peano_bayes.inference.priors.Prior.for_config`
+    selects a model's): ``prior`` (file or code) if given, else the bundled prior of the material code."""
     if prior is not None:
         as_path = Path(prior)
-        return load_prior(as_path.resolve() if as_path.is_file() else prior).for_config()
+        return load_prior(as_path.resolve() if as_path.is_file() else prior)
     code = dataset.material.code
     try:
-        return prior_for(code)
+        return load_prior(code)
     except PeanoBayesInputError as err:
         raise PeanoBayesInputError(
             f"{dataset.source_path}: {err}. Give this dataset a prior file with --prior FILE.toml (Python: "
@@ -144,6 +145,29 @@ def walker_start(posterior, fitted: dict) -> tuple[np.ndarray, np.ndarray]:
     return centre, cov
 
 
+def _model_choice(dataset: Dataset, config, out: Path, *, discover: bool, resume: bool, seed: int, log):
+    """The model a fit samples: ``config``, or with ``discover`` ``config`` plus what discovery names on the
+    data (its report in ``out/discovery``, read back on ``resume``)."""
+    from .discovery.choice import choice_from_report, choose_model, configured_model, effects_in
+
+    if not discover:
+        return configured_model(config)
+    code, folder = dataset.material.code, out / "discovery"
+    if resume and (folder / "report.json").exists():
+        choice = choice_from_report(config, json.loads((folder / "report.json").read_text()), folder)
+        log(f"{code}: discovery report read from {folder}")
+    else:
+        log(f"{code}: discovery from the configured model ({' + '.join(effects_in(config))}) ...")
+        choice = choose_model(
+            dataset, config, folder, tests=dataset.tests, seed=seed, log=lambda m: log(f"{code}: discovery: {m}")
+        )
+    added = ", ".join(choice.adopted) or "nothing"
+    log(f"{code}: discovery verdict {choice.verdict}; named {', '.join(choice.named) or 'none'}; added {added}")
+    if choice.not_in_model:
+        log(f"{code}: named but not in the inference model: {', '.join(choice.not_in_model)}")
+    return choice
+
+
 def infer(
     data: str | Path | Dataset,
     out_dir: str | Path,
@@ -162,6 +186,7 @@ def infer(
     prior: str | Path | None = None,
     label: str | None = None,
     figures: bool = True,
+    discover: bool = False,
     log=print,
 ) -> dict:
     """Fit, sample and write the results of one dataset into ``out_dir/<label>/``; return the summary.
@@ -176,15 +201,21 @@ def infer(
     chunks of ``chunk`` steps until converged or ``max_steps`` (see
     :func:`~peano_bayes.inference.sample.sample`). ``resume`` continues an interrupted run.
     ``sample_all`` also samples the shape constants held by default
-    (:data:`~peano_bayes.inference.posterior.DEFAULT_HELD`).
+    (:data:`~peano_bayes.inference.posterior.DEFAULT_HELD`). ``discover``: first run discovery on the data
+    from the material's configured model, write its report into ``<label>/discovery/`` and sample the
+    configured model plus the physics effects it named (:func:`~peano_bayes.discovery.choice.choose_model`; a
+    resumed run reads the report instead of running discovery again). ``summary.json``'s ``model`` records the
+    choice either way.
     """
     timings = {}
     dataset = load(data) if not isinstance(data, Dataset) else data
     dataset = _select_tests(dataset, tests)
     code = dataset.material.code
-    prior = _prior_of(dataset, prior)
-    config = prior.config
+    whole_prior = _prior_of(dataset, prior)
     out = Path(out_dir) / _check_label(_default_label(dataset) if label is None else label)
+    choice = _model_choice(dataset, whole_prior.config, out, discover=discover, resume=resume, seed=seed, log=log)
+    config = choice.config
+    prior = whole_prior.for_config(config)
     observations = prepare(dataset)
     posterior = build_posterior(observations, prior, config=config, held=() if sample_all else DEFAULT_HELD)
     n_walkers = walker_count(n_walkers, posterior.ndim)  # refuse too few walkers before anything is written
@@ -268,6 +299,7 @@ def infer(
         "dataset": str(dataset.source_path),
         "prior": str(prior.label),
         "tests": list(dataset.tests),
+        "model": choice.as_dict(),
         "seed": seed,
         "n_walkers": n_walkers,
         "n_ensembles": result.n_ensembles,
@@ -319,6 +351,39 @@ def infer(
     return summary
 
 
+def model_table(summaries: list[dict]) -> list[str]:
+    """Markdown lines: per material, the effects of the sampled model beside what discovery named (a fit
+    without discovery says so), and what discovery left unexplained."""
+    lines = [
+        "## Models sampled",
+        "",
+        "| material | effects sampled | discovery verdict | discovery named | added by discovery | not in the "
+        "inference model |",
+        "|---|---|---|---|---|---|",
+    ]
+    notes = []
+    for s in summaries:
+        model = s.get("model")
+        if model is None:  # a summary written before the model was recorded
+            lines.append(f"| {s['material']} | (not recorded) | | | | |")
+            continue
+        found = model["discovery"]
+        sampled = ", ".join(model["effects"])
+        if found is None:
+            lines.append(f"| {s['material']} | {sampled} | not run (the configured model) | | | |")
+            continue
+        lines.append(
+            f"| {s['material']} | {sampled} | {found['verdict']} | {', '.join(found['named']) or 'none'} | "
+            f"{', '.join(found['adopted']) or 'nothing'} | {', '.join(found['not_in_model'])} |"
+        )
+        if found["unexplained"]:
+            notes.append(
+                f"**{s['material']}**: discovery left structure it could not name; see its report "
+                f"(`{found['report']}/report.md`). The sampled model does not explain all of the data."
+            )
+    return [*lines, "", *(f"{n}\n" for n in notes)]
+
+
 def index_markdown(
     summaries: list[dict],
     metrics: dict | None = None,
@@ -336,6 +401,7 @@ def index_markdown(
 
     metrics = metrics or {}
     lines = ["# peano_bayes results", "", "Posterior means with 94 % highest-density intervals (SI units).", ""]
+    lines += model_table(summaries)
     for s in summaries:
         conv = s["convergence"]
         verdict = "converged" if conv["converged"] else "**NOT CONVERGED**: " + "; ".join(conv["problems"])

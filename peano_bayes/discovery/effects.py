@@ -61,7 +61,9 @@ class Effect:
     ``params`` are held at ``hold`` while inactive); ``start`` name -> weak but non-zero value its screening
     fit starts from; ``strength`` the parameters tested against ``off``; ``signature`` the residual pattern
     its absence leaves (a key of :data:`~peano_bayes.discovery.diagnose.SIGNATURES`); ``shows_in`` the rig
-    tests where that pattern appears.
+    tests where that pattern appears; ``model`` the :class:`~peano_bayes.physics.ModelConfig` fields that put
+    the effect into the inference model (empty where that model has no such element: the noise-side and
+    flexible terms, and ``cyclic_softening``).
     """
 
     name: str
@@ -74,9 +76,10 @@ class Effect:
     signature: str
     shows_in: tuple[str, ...]
     hold: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))
+    model: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))
 
 
-def _effect(name, meaning, kind, params, off, start, strength, signature, shows_in, hold=None) -> Effect:
+def _effect(name, meaning, kind, params, off, start, strength, signature, shows_in, hold=None, model=None) -> Effect:
     return Effect(
         name,
         meaning,
@@ -88,6 +91,7 @@ def _effect(name, meaning, kind, params, off, start, strength, signature, shows_
         signature,
         tuple(shows_in),
         MappingProxyType(dict(hold or {})),
+        MappingProxyType(dict(model or {})),
     )
 
 
@@ -109,6 +113,7 @@ _LIST = (
         "loading_split",
         ("load_cycle",),
         {"friction_stiffness_n_per_m": 2e4},
+        model={"friction": "parallel"},
     ),
     _effect(
         "viscoelastic_relaxation",
@@ -121,6 +126,7 @@ _LIST = (
         "loading_split",
         ("load_cycle",),
         {"parallel_maxwell1_tau_s": 1.0},
+        model={"parallel_maxwell": 1},
     ),
     _effect(
         "series_compliance",
@@ -132,6 +138,7 @@ _LIST = (
         ("mount_compliance_m_per_n",),
         "force_level",
         ("load_cycle", "blocking"),
+        model={"mount": True},
     ),
     _effect(
         "bending_stiffness",
@@ -144,6 +151,7 @@ _LIST = (
         "free_strain",
         ("stroke", "step"),
         {"bending_exponent": 6.0},
+        model={"bending": True},
     ),
     _effect(
         "tensile_stiffness",
@@ -155,6 +163,7 @@ _LIST = (
         ("tensile_ka_n_per_m",),
         "blocking_pressure",
         ("blocking", "load_cycle"),
+        model={"tensile": True},
     ),
     _effect(
         "strain_stiffening",
@@ -167,6 +176,7 @@ _LIST = (
         "extension",
         ("load_cycle",),
         {"extension_rate": 50.0},
+        model={"extension": True},
     ),
     _effect(
         "threshold_pressure",
@@ -178,6 +188,7 @@ _LIST = (
         ("threshold_pressure_pa",),
         "low_pressure",
         ("blocking", "stroke"),
+        model={"threshold": True},
     ),
     _effect(
         "flow_restriction",
@@ -189,6 +200,7 @@ _LIST = (
         ("orifice_area_m2",),
         "step_onset",
         ("step",),
+        model={"flow": "orifice"},
     ),
     _effect(
         "nonlinear_damping",
@@ -200,6 +212,7 @@ _LIST = (
         ("damping_up_ns_per_m", "damping_down_ns_per_m", "damping_quadratic_ns2_per_m2"),
         "step_motion",
         ("step",),
+        model={"damping": True},
     ),
     _effect(
         "cyclic_softening",

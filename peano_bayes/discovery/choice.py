@@ -1,0 +1,152 @@
+"""The inference model of a material chosen with discovery: its configured model plus what discovery named.
+
+The effect registry (:data:`~peano_bayes.discovery.effects.LIBRARY`) says which
+:class:`~peano_bayes.physics.ModelConfig` fields contain each physics effect (``Effect.model``), so the same
+names serve both directions: :func:`effects_in` reads the effects a configuration contains, :func:`adopt` adds
+named effects to one. :func:`choose_model` runs discovery from the material's configured model as the base,
+writes its report, and returns a :class:`ModelChoice`: the configuration to sample and the record of why.
+
+Discovery only adds: an effect of the configured model is never removed, because on one specimen's tests a
+missing effect can hide behind another (``ABSORBS``, ``CONFUSABLE``) and discovery misses some generating
+elements on the bundled files (``experiments/discovery/SUMMARY.md``). A named effect with no element in the
+inference model (``cyclic_softening``; the noise-side effects) is recorded as named but not sampled.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..physics.model import ModelConfig
+from .effects import LIBRARY, PHYSICS_EFFECTS
+
+
+def _holds(config: ModelConfig, field: str, value) -> bool:
+    """Whether ``config`` contains what ``field = value`` switches on. A field naming a law counts with any law
+    but ``"none"`` (Dahl friction across the tubes or the whole muscle; an orifice or a laminar inlet), so a
+    named effect never replaces the law a model has; a number of branches counts when at least ``value``."""
+    current = getattr(config, field)
+    if isinstance(value, str):
+        return current != "none"
+    if isinstance(value, bool):
+        return bool(current) or not value
+    if isinstance(value, int):
+        return current >= value
+    return current == value
+
+
+def effects_in(config: ModelConfig) -> tuple[str, ...]:
+    """The library's physics effects that ``config`` contains, in library order."""
+    return tuple(
+        name
+        for name in PHYSICS_EFFECTS
+        if LIBRARY[name].model and all(_holds(config, f, v) for f, v in LIBRARY[name].model.items())
+    )
+
+
+def adopt(config: ModelConfig, named) -> ModelConfig:
+    """``config`` with the elements of the ``named`` effects switched on (effects without an element in the
+    inference model, and those already contained, change nothing)."""
+    changes = {}
+    for name in named:
+        for field, value in LIBRARY[name].model.items():
+            if not _holds(config, field, value):
+                changes[field] = value
+    fields = {f.name: getattr(config, f.name) for f in dataclasses.fields(config)}
+    return ModelConfig(**{**fields, **changes})
+
+
+def config_dict(config: ModelConfig) -> dict:
+    """The fields of ``config`` as a JSON-ready dict."""
+    return {f.name: getattr(config, f.name) for f in dataclasses.fields(config)}
+
+
+@dataclass(frozen=True)
+class ModelChoice:
+    """The model a fit samples and how it was chosen.
+
+    **Fields:** ``config`` the :class:`ModelConfig` sampled; ``configured`` the effects of the material's own
+    model (its prior's ``[config]``); ``named`` the physics effects discovery named; ``adopted`` those of
+    ``named`` that were added (the others were configured already); ``not_in_model`` named effects the
+    inference model has no element for; ``verdict`` discovery's verdict (``None`` without discovery);
+    ``unexplained`` whether discovery ended with structure it could not name; ``report`` the discovery
+    report's folder.
+    """
+
+    config: ModelConfig
+    configured: tuple[str, ...]
+    named: tuple[str, ...] = ()
+    adopted: tuple[str, ...] = ()
+    not_in_model: tuple[str, ...] = ()
+    verdict: str | None = None
+    unexplained: bool = False
+    report: str | None = None
+
+    @property
+    def sampled(self) -> tuple[str, ...]:
+        """The effects of the sampled model."""
+        return effects_in(self.config)
+
+    def as_dict(self) -> dict:
+        return {
+            "config": config_dict(self.config),
+            "effects": list(self.sampled),
+            "configured": list(self.configured),
+            "discovery": None
+            if self.verdict is None
+            else {
+                "verdict": self.verdict,
+                "named": list(self.named),
+                "adopted": list(self.adopted),
+                "not_in_model": list(self.not_in_model),
+                "unexplained": self.unexplained,
+                "report": self.report,
+            },
+        }
+
+
+def configured_model(config: ModelConfig) -> ModelChoice:
+    """The record of a fit that samples its configured model (no discovery)."""
+    return ModelChoice(config=config, configured=effects_in(config))
+
+
+def choice_from_report(config: ModelConfig, report: dict, report_dir: str | Path | None) -> ModelChoice:
+    """The :class:`ModelChoice` that adopts the physics effects a discovery ``report`` named into ``config``."""
+    named = tuple(n for n in report.get("named", ()) if n in PHYSICS_EFFECTS)
+    configured = effects_in(config)
+    chosen = adopt(config, named)
+    return ModelChoice(
+        config=chosen,
+        configured=configured,
+        named=named,
+        adopted=tuple(n for n in named if LIBRARY[n].model and n not in configured),
+        not_in_model=tuple(n for n in named if not LIBRARY[n].model),
+        verdict=str(report.get("verdict")),
+        unexplained=report.get("verdict") == "unexplained" or bool(report.get("described")),
+        report=None if report_dir is None else str(report_dir),
+    )
+
+
+def choose_model(dataset, config: ModelConfig, out_dir: str | Path, *, tests=None, seed: int = 0, log=print):
+    """Run discovery on ``dataset`` (its first specimen, ``tests``) from the effects of ``config`` as the base,
+    write the report into ``out_dir`` and return the :class:`ModelChoice` that adds what it named."""
+    from .data import discovery_data
+    from .report import write_report
+    from .workflow import discover
+
+    split = discovery_data(dataset, tests=tests)
+    result = discover(split, base=effects_in(config), seed=seed, progress=log)
+    write_report(result, Path(out_dir))
+    return choice_from_report(config, result.report, out_dir)
+
+
+__all__ = [
+    "ModelChoice",
+    "adopt",
+    "choice_from_report",
+    "choose_model",
+    "config_dict",
+    "configured_model",
+    "effects_in",
+]

@@ -1,0 +1,113 @@
+"""The model a fit samples when discovery chooses it: the effect registry's model fields, adoption, the record
+in summary.json and index.md, and the resumed fit that reads the discovery report back."""
+
+import dataclasses
+import json
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from peano_bayes.discovery.choice import adopt, choice_from_report, configured_model, effects_in
+from peano_bayes.discovery.effects import LIBRARY, PHYSICS_EFFECTS
+from peano_bayes.physics.model import PARAMETERS, ModelConfig
+
+#: A model with no element a library effect can switch on (the flow law is always present).
+BARE = ModelConfig(bending=False, tensile=False, extension=False, friction="none")
+WITH_ELEMENT = [n for n in PHYSICS_EFFECTS if LIBRARY[n].model]
+
+
+def test_only_effects_without_an_inference_element_have_no_model_fields():
+    assert set(PHYSICS_EFFECTS) - set(WITH_ELEMENT) == {"cyclic_softening"}
+    for name, effect in LIBRARY.items():
+        if effect.kind != "physics":
+            assert not effect.model, name
+
+
+@pytest.mark.parametrize("name", WITH_ELEMENT)
+def test_adopting_an_effect_puts_its_physics_parameters_into_the_model(name):
+    """The registry's model fields switch on the element that reads the effect's own parameters (a field
+    mapped to the wrong element fails here)."""
+    config = adopt(BARE, [name])
+    assert name in effects_in(config)
+    physics_params = {p for p in LIBRARY[name].params if p in PARAMETERS}
+    assert physics_params and physics_params <= set(config.parameter_names()), name
+    if name != "flow_restriction":  # the orifice is in every model
+        assert not physics_params <= set(BARE.parameter_names()), name
+
+
+configs = st.builds(
+    ModelConfig,
+    bending=st.booleans(),
+    tensile=st.booleans(),
+    extension=st.booleans(),
+    mount=st.booleans(),
+    parallel_maxwell=st.integers(0, 3),
+    series_kelvin=st.integers(0, 3),
+    friction=st.sampled_from(["none", "parallel", "whole"]),
+    threshold=st.booleans(),
+    flow=st.sampled_from(["orifice", "laminar"]),
+    damping=st.booleans(),
+)
+
+
+@given(configs, st.lists(st.sampled_from(list(LIBRARY)), max_size=5))
+def test_adoption_only_adds_and_contains_every_named_element(config, named):
+    chosen = adopt(config, named)
+    assert set(effects_in(config)) <= set(effects_in(chosen))
+    assert {n for n in named if LIBRARY[n].model} <= set(effects_in(chosen))
+    assert set(config.parameter_names()) <= set(chosen.parameter_names())
+    # nothing named that the model already has: the same model (friction kind and branch counts kept)
+    if set(named) <= set(effects_in(config)):
+        assert chosen == config
+
+
+def test_a_report_becomes_a_choice_with_its_record():
+    report = {"verdict": "unexplained", "named": ["hysteresis", "cyclic_softening", "sensor_gain"], "described": []}
+    choice = choice_from_report(BARE, report, "out/TP/discovery")
+    assert choice.config.friction == "parallel" and choice.adopted == ("hysteresis",)
+    assert choice.named == ("hysteresis", "cyclic_softening")  # the noise-side name is not physics
+    assert choice.not_in_model == ("cyclic_softening",) and choice.unexplained
+    record = json.loads(json.dumps(choice.as_dict()))
+    assert record["discovery"]["report"] == "out/TP/discovery" and "hysteresis" in record["effects"]
+    assert record["config"] == {f.name: getattr(choice.config, f.name) for f in dataclasses.fields(ModelConfig)}
+    assert configured_model(BARE).as_dict()["discovery"] is None
+
+
+def test_index_shows_the_sampled_model_beside_what_discovery_named():
+    from peano_bayes.pipeline import model_table
+
+    found = choice_from_report(BARE, {"verdict": "unexplained", "named": ["series_compliance"]}, "r/PC/discovery")
+    text = "\n".join(
+        model_table(
+            [
+                {"material": "PC", "model": found.as_dict()},
+                {"material": "TP", "model": configured_model(BARE).as_dict()},
+            ]
+        )
+    )
+    assert "| PC | series_compliance, flow_restriction | unexplained | series_compliance | series_compliance |" in text
+    assert "| TP | flow_restriction | not run (the configured model) |" in text
+    assert "**PC**: discovery left structure it could not name" in text and "r/PC/discovery/report.md" in text
+
+
+def test_a_resumed_fit_reads_the_discovery_report_instead_of_running_discovery(tmp_path, monkeypatch):
+    from peano_bayes import bundled
+    from peano_bayes.data import load
+    from peano_bayes.discovery import choice as choice_module
+    from peano_bayes.pipeline import _model_choice
+
+    def never(*args, **kwargs):
+        raise AssertionError("discovery ran again")
+
+    monkeypatch.setattr(choice_module, "choose_model", never)
+    folder = tmp_path / "TP" / "discovery"
+    folder.mkdir(parents=True)
+    (folder / "report.json").write_text(json.dumps({"verdict": "named", "named": ["nonlinear_damping"]}))
+    lines = []
+    choice = _model_choice(
+        load(bundled.dataset_path("TP")), BARE, tmp_path / "TP", discover=True, resume=True, seed=0, log=lines.append
+    )
+    assert choice.config.damping and choice.adopted == ("nonlinear_damping",) and choice.report == str(folder)
+    assert any("discovery report read from" in line for line in lines)
+    assert _model_choice(None, BARE, tmp_path, discover=False, resume=False, seed=0, log=print).verdict is None
