@@ -169,7 +169,11 @@ def test_discovery_inputs_share_pressure_within_a_condition_and_keep_each_runs_s
 
 @pytest.fixture(scope="module")
 def hysteresis_data():
-    return hidden_dataset(Case(("hysteresis",), 4.0), seed=100)
+    """A hysteresis case of the small validation below (seed 111): same data shapes, so the discover CLI test
+    and the validation share the superset's compiled programs in this process (another seed's denoiser split
+    a ramp, which changed a shape and cost a second compilation of every program, about 100 s). The strict
+    check of the CLI test (named alone, gap halved) is asserted on it; the validation judges recall over seeds."""
+    return hidden_dataset(Case(("hysteresis",), 4.0), seed=111)
 
 
 # Its own work unit (the group name joins the module's, giving "discovery_nesting"): it compiles its own predict
