@@ -630,7 +630,9 @@ def run_bundled(
         if done.exists():
             summary = json.loads(done.read_text())
             if not _can_continue(summary, out_dir / code, max_steps):
-                log(f"{code}: {done} exists, skipped")
+                without = kwargs.get("discover") and (summary.get("model") or {}).get("discovery") is None
+                note = " (it was sampled without discovery: delete it to redo with --discover)" if without else ""
+                log(f"{code}: {done} exists, skipped{note}")
                 summaries[code] = summary
                 continue
             log(f"{code}: not converged at {summary['steps']} steps; resuming with a larger step limit")
