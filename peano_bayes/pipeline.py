@@ -147,20 +147,30 @@ def walker_start(posterior, fitted: dict) -> tuple[np.ndarray, np.ndarray]:
 
 def _model_choice(dataset: Dataset, config, out: Path, *, discover: bool, resume: bool, seed: int, log):
     """The model a fit samples: ``config``, or with ``discover`` ``config`` plus what discovery names on the
-    data (its report in ``out/discovery``, read back on ``resume``)."""
+    data (its report in ``out/discovery``). On ``resume`` the model of the saved fit: the report's if there is
+    one, else ``config``."""
     from .discovery.choice import choice_from_report, choose_model, configured_model, effects_in
 
-    if not discover:
-        return configured_model(config)
-    code, folder = dataset.material.code, out / "discovery"
+    folder = out / "discovery"
+    # A resumed fit keeps the model its saved least squares and sampler state belong to, whatever the flag says.
     if resume and (folder / "report.json").exists():
         choice = choice_from_report(config, json.loads((folder / "report.json").read_text()), folder)
-        log(f"{code}: discovery report read from {folder}")
+        log(f"{dataset.material.code}: discovery report read from {folder}")
+    elif resume and (out / "fit.json").exists():
+        if discover:
+            log(
+                f"{dataset.material.code}: resuming a fit sampled without discovery; discovery not run (delete "
+                f"{out} to redo it with --discover)"
+            )
+        return configured_model(config)
+    elif not discover:
+        return configured_model(config)
     else:
+        code = dataset.material.code
         log(f"{code}: discovery from the configured model ({' + '.join(effects_in(config))}) ...")
-        choice = choose_model(
-            dataset, config, folder, tests=dataset.tests, seed=seed, log=lambda m: log(f"{code}: discovery: {m}")
-        )
+        # the dataset holds the fitted tests only; discovery reads its first specimen's
+        choice = choose_model(dataset, config, folder, seed=seed, log=lambda m: log(f"{code}: discovery: {m}"))
+    code = dataset.material.code
     added = ", ".join(choice.adopted) or "nothing"
     log(f"{code}: discovery verdict {choice.verdict}; named {', '.join(choice.named) or 'none'}; added {added}")
     if choice.not_in_model:

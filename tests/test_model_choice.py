@@ -1,7 +1,6 @@
 """The model a fit samples when discovery chooses it: the effect registry's model fields, adoption, the record
 in summary.json and index.md, and the resumed fit that reads the discovery report back."""
 
-import dataclasses
 import json
 
 import pytest
@@ -63,21 +62,41 @@ def test_adoption_only_adds_and_contains_every_named_element(config, named):
 
 
 def test_a_report_becomes_a_choice_with_its_record():
-    report = {"verdict": "unexplained", "named": ["hysteresis", "cyclic_softening", "sensor_gain"], "described": []}
+    # the shape of a real report (discovery/workflow.py): physics effects under "named", noise-side ones apart
+    report = {
+        "verdict": "named",
+        "named": ["hysteresis", "cyclic_softening"],
+        "noise_model": ["sensor_offset"],
+        "described": [],
+        "structure_left": False,
+    }
     choice = choice_from_report(BARE, report, "out/TP/discovery")
     assert choice.config.friction == "parallel" and choice.adopted == ("hysteresis",)
-    assert choice.named == ("hysteresis", "cyclic_softening")  # the noise-side name is not physics
-    assert choice.not_in_model == ("cyclic_softening",) and choice.unexplained
+    assert choice.named == ("hysteresis", "cyclic_softening") and choice.not_in_model == ("cyclic_softening",)
+    assert not choice.unexplained
     record = json.loads(json.dumps(choice.as_dict()))
-    assert record["discovery"]["report"] == "out/TP/discovery" and "hysteresis" in record["effects"]
-    assert record["config"] == {f.name: getattr(choice.config, f.name) for f in dataclasses.fields(ModelConfig)}
+    assert record["discovery"]["report"] == "out/TP/discovery" and record["discovery"]["verdict"] == "named"
+    assert record["config"]["friction"] == "parallel" and record["config"]["bending"] is False
+    assert record["effects"] == ["hysteresis", "flow_restriction"] and record["configured"] == ["flow_restriction"]
     assert configured_model(BARE).as_dict()["discovery"] is None
+    # structure left after the last named effect, or a flexible term the data needed, is unexplained structure
+    assert choice_from_report(BARE, {**report, "structure_left": True}, None).unexplained
+    described = {"verdict": "unexplained", "named": [], "described": ["session_baseline"], "structure_left": False}
+    assert choice_from_report(BARE, described, None).unexplained
+
+
+def test_naming_the_inlet_restriction_keeps_a_laminar_inlet():
+    laminar = ModelConfig(flow="laminar")
+    assert "flow_restriction" in effects_in(laminar)
+    assert adopt(laminar, ["flow_restriction"]).flow == "laminar"
+    assert "laminar_conductance_m3_per_s_pa" in adopt(laminar, ["flow_restriction"]).parameter_names()
 
 
 def test_index_shows_the_sampled_model_beside_what_discovery_named():
     from peano_bayes.pipeline import model_table
 
-    found = choice_from_report(BARE, {"verdict": "unexplained", "named": ["series_compliance"]}, "r/PC/discovery")
+    report = {"verdict": "named", "named": ["series_compliance"], "described": [], "structure_left": True}
+    found = choice_from_report(BARE, report, "r/PC/discovery")
     text = "\n".join(
         model_table(
             [
@@ -86,7 +105,7 @@ def test_index_shows_the_sampled_model_beside_what_discovery_named():
             ]
         )
     )
-    assert "| PC | series_compliance, flow_restriction | unexplained | series_compliance | series_compliance |" in text
+    assert "| PC | series_compliance, flow_restriction | named | series_compliance | series_compliance |" in text
     assert "| TP | flow_restriction | not run (the configured model) |" in text
     assert "**PC**: discovery left structure it could not name" in text and "r/PC/discovery/report.md" in text
 
@@ -111,3 +130,26 @@ def test_a_resumed_fit_reads_the_discovery_report_instead_of_running_discovery(t
     assert choice.config.damping and choice.adopted == ("nonlinear_damping",) and choice.report == str(folder)
     assert any("discovery report read from" in line for line in lines)
     assert _model_choice(None, BARE, tmp_path, discover=False, resume=False, seed=0, log=print).verdict is None
+
+
+def test_a_resumed_fit_keeps_the_model_of_its_saved_state(tmp_path):
+    """Resuming a fit sampled without discovery does not run discovery (its saved state belongs to the configured
+    model), and resuming one sampled with discovery keeps the report's model without the flag."""
+    from peano_bayes import bundled
+    from peano_bayes.data import load
+    from peano_bayes.pipeline import _model_choice
+
+    dataset = load(bundled.dataset_path("TP"))
+    plain = tmp_path / "plain"
+    plain.mkdir()
+    (plain / "fit.json").write_text("{}")
+    lines = []
+    choice = _model_choice(dataset, BARE, plain, discover=True, resume=True, seed=0, log=lines.append)
+    assert choice.verdict is None and choice.config == BARE
+    assert any("resuming a fit sampled without discovery" in line for line in lines)
+
+    found = tmp_path / "found"
+    (found / "discovery").mkdir(parents=True)
+    (found / "discovery" / "report.json").write_text(json.dumps({"verdict": "named", "named": ["hysteresis"]}))
+    choice = _model_choice(dataset, BARE, found, discover=False, resume=True, seed=0, log=lambda m: None)
+    assert choice.config.friction == "parallel" and choice.verdict == "named"

@@ -8,8 +8,9 @@ writes its report, and returns a :class:`ModelChoice`: the configuration to samp
 
 Discovery only adds: an effect of the configured model is never removed, because on one specimen's tests a
 missing effect can hide behind another (``ABSORBS``, ``CONFUSABLE``) and discovery misses some generating
-elements on the bundled files (``experiments/discovery/SUMMARY.md``). A named effect with no element in the
-inference model (``cyclic_softening``; the noise-side effects) is recorded as named but not sampled.
+elements on the bundled files (``experiments/discovery/SUMMARY.md``). A named physics effect with no element in
+the inference model (``cyclic_softening``) is recorded as named but not sampled; the noise-side effects a report
+lists under ``noise_model`` are left out (the likelihood's noise model is fixed).
 """
 
 from __future__ import annotations
@@ -24,7 +25,8 @@ from .effects import LIBRARY, PHYSICS_EFFECTS
 
 def _holds(config: ModelConfig, field: str, value) -> bool:
     """Whether ``config`` contains what ``field = value`` switches on. A field naming a law counts with any law
-    but ``"none"`` (Dahl friction across the tubes or the whole muscle; an orifice or a laminar inlet), so a
+    but ``"none"`` (Dahl friction across the tubes or the whole muscle; an orifice or a laminar inlet, so
+    ``flow_restriction`` is in every model and ``value`` only says which law :func:`adopt` would choose), so a
     named effect never replaces the law a model has; a number of branches counts when at least ``value``."""
     current = getattr(config, field)
     if isinstance(value, str):
@@ -70,7 +72,8 @@ class ModelChoice:
     model (its prior's ``[config]``); ``named`` the physics effects discovery named; ``adopted`` those of
     ``named`` that were added (the others were configured already); ``not_in_model`` named effects the
     inference model has no element for; ``verdict`` discovery's verdict (``None`` without discovery);
-    ``unexplained`` whether discovery ended with structure it could not name; ``report`` the discovery
+    ``unexplained`` whether discovery ended with structure it could not name (its verdict, a flexible term it
+    needed, or significant residual structure left after the last effect); ``report`` the discovery
     report's folder.
     """
 
@@ -123,7 +126,9 @@ def choice_from_report(config: ModelConfig, report: dict, report_dir: str | Path
         adopted=tuple(n for n in named if LIBRARY[n].model and n not in configured),
         not_in_model=tuple(n for n in named if not LIBRARY[n].model),
         verdict=str(report.get("verdict")),
-        unexplained=report.get("verdict") == "unexplained" or bool(report.get("described")),
+        unexplained=report.get("verdict") == "unexplained"
+        or bool(report.get("described"))
+        or bool(report.get("structure_left")),
         report=None if report_dir is None else str(report_dir),
     )
 
