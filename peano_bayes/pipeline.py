@@ -153,24 +153,23 @@ def _model_choice(dataset: Dataset, config, out: Path, *, discover: bool, resume
 
     folder = out / "discovery"
     # A resumed fit keeps the model its saved least squares and sampler state belong to, whatever the flag says.
-    if resume and (folder / "report.json").exists():
-        choice = choice_from_report(config, json.loads((folder / "report.json").read_text()), folder)
-        log(f"{dataset.material.code}: discovery report read from {folder}")
-    elif resume and (out / "fit.json").exists():
-        if discover:
+    read_back = resume and (folder / "report.json").exists()
+    resumed_without = resume and not read_back and (out / "fit.json").exists()
+    if not read_back and (resumed_without or not discover):
+        if resumed_without and discover:
             log(
                 f"{dataset.material.code}: resuming a fit sampled without discovery; discovery not run (delete "
                 f"{out} to redo it with --discover)"
             )
         return configured_model(config)
-    elif not discover:
-        return configured_model(config)
+    code = dataset.material.code
+    if read_back:
+        choice = choice_from_report(config, json.loads((folder / "report.json").read_text()), folder)
+        log(f"{code}: discovery report read from {folder}")
     else:
-        code = dataset.material.code
         log(f"{code}: discovery from the configured model ({' + '.join(effects_in(config))}) ...")
         # the dataset holds the fitted tests only; discovery reads its first specimen's
         choice = choose_model(dataset, config, folder, seed=seed, log=lambda m: log(f"{code}: discovery: {m}"))
-    code = dataset.material.code
     added = ", ".join(choice.adopted) or "nothing"
     log(f"{code}: discovery verdict {choice.verdict}; named {', '.join(choice.named) or 'none'}; added {added}")
     if choice.not_in_model:

@@ -55,8 +55,7 @@ def adopt(config: ModelConfig, named) -> ModelConfig:
         for field, value in LIBRARY[name].model.items():
             if not _holds(config, field, value):
                 changes[field] = value
-    fields = {f.name: getattr(config, f.name) for f in dataclasses.fields(config)}
-    return ModelConfig(**{**fields, **changes})
+    return ModelConfig(**{**config_dict(config), **changes})
 
 
 def config_dict(config: ModelConfig) -> dict:
