@@ -32,7 +32,7 @@ from .defaults import (
 from .errors import PeanoBayesInputError
 from .formatting import format_number
 from .inference.fit import fit, fit_quality
-from .inference.laplace import posterior_mode
+from .inference.laplace import posterior_mode, refine_mode
 from .inference.likelihood import prepare
 from .inference.posterior import CONTRAST_PREFIX, DEFAULT_HELD, SPECIMEN_SD, build_posterior
 from .inference.priors import load_prior
@@ -205,8 +205,9 @@ def infer(
     ``label``: the result folder's name; default: the data file's stem (``TP`` for the bundled ``TP.csv``), so
     two datasets of one material do not overwrite each other. ``figures``: also draw the data over the
     posterior predictive (and the corner plot) into ``figures/``. ``tests``: which tests to fit
-    (default :data:`DEFAULT_TESTS`). The least-squares point is polished to the posterior mode
-    (:func:`~peano_bayes.inference.laplace.posterior_mode`); sampling runs ``warmup`` steps of warm-up, then
+    (default :data:`DEFAULT_TESTS`). The least-squares point is polished to the posterior mode, first with the
+    driving inputs taken as exact (:func:`~peano_bayes.inference.laplace.posterior_mode`), then on the full
+    likelihood (:func:`~peano_bayes.inference.laplace.refine_mode`); sampling runs ``warmup`` steps of warm-up, then
     chunks of ``chunk`` steps until converged or ``max_steps`` (see
     :func:`~peano_bayes.inference.sample.sample`). ``resume`` continues an interrupted run.
     ``sample_all`` also samples the shape constants held by default
@@ -253,22 +254,30 @@ def infer(
         )
 
     centre, covariance = walker_start(posterior, fitted)
+    # Every batch in calls of half an ensemble (what emcee's red-blue moves evaluate): one compilation, which
+    # also serves the mode's refinement on the full likelihood.
+    rows = max(1, n_walkers // 2)
+    posterior = posterior.with_batch_rows(rows)
     laplace = None
     if not (resume and state_path.exists()):  # a resumed run restores its walkers and needs no start
         log(f"{code}: posterior mode (BFGS) from the least-squares point ...")
         laplace = posterior_mode(posterior, centre, covariance)
-        centre, covariance = laplace.mode, laplace.covariance
-        timings["mode_s"] = laplace.seconds
         log(
-            f"{code}: mode found in {laplace.steps} steps, {laplace.seconds:.1f} s, log posterior "
+            f"{code}: mode with exact inputs found in {laplace.steps} steps, {laplace.seconds:.1f} s, log posterior "
             f"{laplace.log_prob:.1f}" + (f" ({laplace.status})" if laplace.status else "")
         )
     t0 = time.perf_counter()
-    # Every batch in calls of half an ensemble (what emcee's red-blue moves evaluate): one compilation.
-    rows = max(1, n_walkers // 2)
-    posterior = posterior.with_batch_rows(rows)
     posterior.batched(np.tile(centre, (rows, 1)))
     timings["compile_s"] = time.perf_counter() - t0
+    if laplace is not None:
+        exact = laplace
+        laplace = refine_mode(posterior.batched, exact)
+        centre, covariance = laplace.mode, laplace.covariance
+        timings["mode_s"] = exact.seconds + laplace.seconds
+        log(
+            f"{code}: mode on the full likelihood in {laplace.steps} steps, {laplace.seconds:.1f} s, log posterior "
+            f"{laplace.log_prob:.1f}" + (f" ({laplace.status})" if laplace.status else "")
+        )
     result = sample(
         posterior,
         centre,
@@ -342,7 +351,12 @@ def infer(
         "least_squares": {k: fitted.get(k) for k in ("cost", "n_starts", "n_failed", "n_step_limit", "params")},
         "posterior_mode": None
         if laplace is None
-        else {"log_prob": laplace.log_prob, "steps": laplace.steps, "status": laplace.status or "successful"},
+        else {
+            "log_prob": laplace.log_prob,
+            "steps": laplace.steps,
+            "status": laplace.status or "successful",
+            "exact_inputs": {"log_prob": exact.log_prob, "steps": exact.steps, "status": exact.status or "successful"},
+        },
         "timings_s": timings,
     }
     write_netcdf(idata, out / "posterior.nc")

@@ -12,6 +12,7 @@ own loop, or a compiled Hessian) cost more compile time than the whole optimisat
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 
@@ -88,14 +89,92 @@ def posterior_mode(
         reason = status or "BFGS ended below its start"
         return Laplace(start, np.asarray(fallback_covariance), lp_start, steps, reason, time.perf_counter() - t0)
     hessian = finite_difference_hessian(lambda x: objective(x)[1], mode)
-    values, vectors = np.linalg.eigh(hessian)
-    fallback = np.asarray(fallback_covariance)
-    # A direction with no curvature gets the fallback's variance along it.
-    fallback_var = np.einsum("id,ij,jd->d", vectors, fallback, vectors)
-    variance = np.where(values > 1e-8, 1.0 / np.where(values > 1e-8, values, 1.0), fallback_var)
-    variance = np.minimum(variance, max_sd**2)
-    covariance = (vectors * variance) @ vectors.T
+    covariance = _laplace_covariance(hessian, fallback_covariance, max_sd)
     return Laplace(mode, covariance, lp_mode, steps, status, time.perf_counter() - t0)
 
 
-__all__ = ["Laplace", "finite_difference_hessian", "posterior_mode"]
+def _laplace_covariance(hessian: np.ndarray, fallback_covariance: np.ndarray, max_sd: float) -> np.ndarray:
+    """(D, D) inverse of the Hessian of -log posterior; a direction with no curvature (eigenvalue <= 1e-8) gets
+    the fallback's variance along it, and no direction's standard deviation exceeds ``max_sd``."""
+    values, vectors = np.linalg.eigh(0.5 * (hessian + hessian.T))
+    fallback = np.asarray(fallback_covariance)
+    fallback_var = np.einsum("id,ij,jd->d", vectors, fallback, vectors)
+    variance = np.where(values > 1e-8, 1.0 / np.where(values > 1e-8, values, 1.0), fallback_var)
+    variance = np.minimum(variance, max_sd**2)
+    return (vectors * variance) @ vectors.T
+
+
+def refine_mode(
+    batched,
+    start: Laplace,
+    *,
+    step: float = 1e-3,
+    hessian_step: float = 0.05,
+    gtol: float = 1e-3,
+    max_steps: int = 300,
+    max_sd: float = 3.0,
+) -> Laplace:
+    """The mode and Laplace covariance of the full log posterior ``batched`` (``f(thetas (n, D)) -> (n,)``,
+    the sampler's own compiled function), from ``start``, the mode of the posterior with exact inputs.
+
+    :func:`posterior_mode` optimises the posterior with the fitted driving inputs taken as exact
+    (:attr:`~peano_bayes.inference.posterior.Posterior.value_and_grad`), whose gradient compiles in a third of
+    the time. Where the inputs' error matters that mode is not the sampled posterior's: on the bundled PR data
+    it lay 4-6 posterior standard deviations off in five parameters, log posterior 6667 against 6747, and the
+    walkers started there needed about 800 steps to reach the posterior. This step moves it there: BFGS in
+    coordinates whitened by ``start.covariance`` (``theta = mode + L u``), each gradient by central differences
+    of step ``step`` (in those units) from one batched call of 2D + 1 points, so no other program is
+    compiled; then the Hessian by central differences of values (step ``hessian_step``, 2D^2 + 1 points) and
+    the covariance as in :func:`posterior_mode`, ``start.covariance`` standing in for directions without
+    curvature. If the optimiser ends non-finite or below its start, ``start`` is returned with the full
+    posterior's value at its mode and the reason in ``status``.
+    """
+    t0 = time.perf_counter()
+    d = start.mode.size
+    chol = np.linalg.cholesky(start.covariance)
+    to_theta = lambda u: start.mode + chol @ u  # noqa: E731
+    eye = np.eye(d)
+
+    def objective(u):
+        x = to_theta(u)
+        points = np.concatenate([x[None], x + step * chol.T, x - step * chol.T])
+        values = -np.asarray(batched(points), dtype=float)
+        if not np.all(np.isfinite(values)):  # at the support's edge: a wall the line search backs off
+            return (values[0] if np.isfinite(values[0]) else np.inf), np.zeros(d)
+        return values[0], (values[1 : d + 1] - values[d + 1 :]) / (2.0 * step)
+
+    lp_start = -objective(np.zeros(d))[0]
+    found = optimize.minimize(
+        objective, np.zeros(d), jac=True, method="BFGS", options={"maxiter": max_steps, "gtol": gtol}
+    )
+    lp_mode = -float(found.fun)
+    status = "" if found.success or np.linalg.norm(found.jac) < 10 * gtol else str(found.message)
+    if not np.isfinite(lp_mode) or lp_mode < lp_start:
+        reason = status or "BFGS ended below its start"
+        return dataclasses.replace(start, log_prob=lp_start, status=reason, seconds=time.perf_counter() - t0)
+    u0 = np.asarray(found.x)
+    pairs = [(i, j) for i in range(d) for j in range(i + 1, d)]
+    h = hessian_step
+    points = [u0, *(u0 + h * eye), *(u0 - h * eye)]
+    for i, j in pairs:
+        points += [
+            u0 + h * (eye[i] + eye[j]),
+            u0 + h * (eye[i] - eye[j]),
+            u0 - h * (eye[i] - eye[j]),
+            u0 - h * (eye[i] + eye[j]),
+        ]
+    values = -np.asarray(batched(np.array([to_theta(u) for u in points])), dtype=float)
+    if not np.all(np.isfinite(values)):  # a Hessian point beyond the support: keep the start's shape
+        status = status or "Hessian not finite; the start's covariance kept"
+        return Laplace(to_theta(u0), start.covariance, lp_mode, int(found.nit), status, time.perf_counter() - t0)
+    centre, plus, minus = values[0], values[1 : d + 1], values[d + 1 : 2 * d + 1]
+    hessian_u = np.diag((plus - 2.0 * centre + minus) / h**2)
+    corners = values[2 * d + 1 :].reshape(-1, 4)
+    for (i, j), (pp, pm, mp, mm) in zip(pairs, corners, strict=True):
+        hessian_u[i, j] = hessian_u[j, i] = (pp - pm - mp + mm) / (4.0 * h * h)
+    inverse = np.linalg.inv(chol)
+    covariance = _laplace_covariance(inverse.T @ hessian_u @ inverse, start.covariance, max_sd)
+    return Laplace(to_theta(u0), covariance, lp_mode, int(found.nit), status, time.perf_counter() - t0)
+
+
+__all__ = ["Laplace", "finite_difference_hessian", "posterior_mode", "refine_mode"]

@@ -20,7 +20,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import stats
 
-from ..inference.laplace import posterior_mode
+from ..inference.laplace import posterior_mode, refine_mode
 from ..inference.likelihood import prepare
 from ..inference.posterior import Posterior, build_posterior
 from ..inference.priors import prior_for
@@ -120,7 +120,8 @@ def run_replicate(
         posterior = replace(base, observations=prepare(data))
     start = np.asarray(prior.median_unconstrained())
     spread = np.std(prior.sample(np.random.default_rng(0), 2000), axis=0)
-    laplace = posterior_mode(posterior, start, np.diag(spread**2))
+    posterior = posterior.with_batch_rows(n_walkers // 2)  # the sampler's batch size: one compilation
+    laplace = refine_mode(posterior.batched, posterior_mode(posterior, start, np.diag(spread**2)))
     result = sample(
         posterior,
         laplace.mode,
