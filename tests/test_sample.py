@@ -15,9 +15,11 @@ import pytest
 from peano_bayes.errors import PeanoBayesInputError
 from peano_bayes.inference.sample import (
     TARGETS,
+    Convergence,
     IndependenceProposal,
     convergence,
     load_state,
+    planned_chunk,
     pooled,
     proposal_at,
     sample,
@@ -126,8 +128,9 @@ def test_warmup_rounds_and_the_proposal_in_force():
 
 def test_a_step_limit_inside_the_warmup_says_so():
     g = Gaussian()
-    result = sample(g, g.mean, 0.01 * np.eye(3), n_walkers=8, seed=0, warmup=300, max_steps=100, progress=False,
-                    log=lambda m: None)
+    result = sample(
+        g, g.mean, 0.01 * np.eye(3), n_walkers=8, seed=0, warmup=300, max_steps=100, progress=False, log=lambda m: None
+    )
     assert result.chain.shape == (100, 4 * 8, 3)  # four ensembles of eight walkers
     assert not result.convergence.converged
     assert "inside the warm-up" in result.convergence.problems[0]
@@ -150,6 +153,27 @@ def test_step_limit_gives_an_unconverged_result_that_says_why():
     assert result.chain.shape == (100, 4 * 8, 3)
     assert not result.convergence.converged
     assert any("autocorrelation times" in p for p in result.convergence.problems)
+
+
+def figures(tau, ess, discard):
+    """A not-yet-converged :class:`Convergence` of two parameters: the first's tau and bulk ESS are the given
+    ones (the binding ones), its tail ESS twice that."""
+    tau, bulk = np.array([tau, tau / 2]), np.array([ess, 2 * ess])  # the first parameter binds
+    return Convergence(tau, discard, 0.0, np.ones(2), bulk, 2 * bulk, False, ("not yet",), 4)
+
+
+def test_the_next_chunk_is_what_tau_and_ess_say_is_missing():
+    # tau 20 after 1000 sampled steps (warm-up 300, discard 340): 52 tau = 1040 steps, plus a tenth: 1144, so
+    # 144 more.
+    assert planned_chunk(figures(20.0, 5000.0, 340), 1300, 300, 500) == 144
+    # Early on the chunk caps it: 1144 - 500 sampled = 644 > 500.
+    assert planned_chunk(figures(20.0, 5000.0, 340), 800, 300, 500) == 500
+    # ESS-bound: tau 2 (104 steps suffice), ESS 500 of 1000 on 400 kept steps of 500 sampled: 400 more kept
+    # steps, 900 sampled, a tenth more: 990, so 490.
+    assert planned_chunk(figures(2.0, 500.0, 400), 800, 300, 1000) == 490
+    # Nearly there: never fewer than MIN_CHUNK (50); tau undefined (a stuck walker): the whole chunk.
+    assert planned_chunk(figures(20.0, 5000.0, 340), 1440, 300, 500) == 50
+    assert planned_chunk(figures(np.inf, 5000.0, 340), 1300, 300, 500) == 500
 
 
 def test_resume_continues_bit_identically(tmp_path):

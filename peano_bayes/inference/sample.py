@@ -12,7 +12,8 @@ posterior mode, and advanced chunk by chunk side by side. Each ensemble has two 
   run rebuilds it exactly.
 - **Sampling**: the last proposal is frozen (the kernel no longer changes, so every move leaves the posterior
   invariant: the independence move is a Metropolis-Hastings step with its Hastings factor) and the run
-  proceeds in chunks of ``chunk`` steps until
+  proceeds in chunks of at most ``chunk`` steps, each as long as the current autocorrelation time and ESS
+  say is still missing (:func:`planned_chunk`), until
 
   - the kept chain (after the warm-up and a further ``2 tau_max``) is at least ``50 tau_max`` long (emcee's
     own reliability rule for its integrated autocorrelation time ``tau``),
@@ -73,6 +74,8 @@ ADAPTED_MOVES = (0.55, 0.15, 0.3)
 EIGENVALUE_FLOOR = 1e-8
 #: Warm-up rounds; the proposal is refitted after each.
 WARMUP_ROUNDS = 3
+#: Fewest steps of a sampling chunk (see :func:`planned_chunk`): each chunk ends in a convergence check.
+MIN_CHUNK = 50
 
 
 @dataclass(frozen=True, eq=False)
@@ -275,6 +278,29 @@ def convergence(chain: np.ndarray, names=None, start: int = 0, n_ensembles: int 
     return Convergence(tau, discard, lengths, rhat, ess_bulk, ess_tail, not problems, tuple(problems), n_ensembles)
 
 
+def planned_chunk(result: Convergence, steps: int, warmup: int, chunk: int, min_chunk: int = MIN_CHUNK) -> int:
+    """Steps for the next chunk of a run of ``steps`` steps (``warmup`` of them warm-up) that is not yet
+    converged (``result``): the steps its current autocorrelation time and ESS say are still missing, plus a
+    tenth (``tau`` estimates grow as a chain lengthens), between ``min_chunk`` and ``chunk``. A chain a few
+    steps short of its target then ends a few steps past it rather than up to ``chunk - 1`` past it (on PR,
+    tau 21, a 500-step chunk would overshoot by a third of the run). A pure function of the chain, so a
+    resumed run plans the same chunks."""
+    tau = float(np.max(result.tau))
+    if not np.isfinite(tau):
+        return chunk
+    sampled, kept = steps - warmup, max(steps - result.discard, 1)
+    by_tau = (TARGETS["min_tau_lengths"] + 2.0) * tau  # the kept length plus the 2 tau discarded
+    ess = min(
+        float(np.min(result.ess_bulk)) / TARGETS["min_ess_bulk"],
+        float(np.min(result.ess_tail)) / TARGETS["min_ess_tail"],
+    )
+    by_ess = sampled + kept * (1.0 / ess - 1.0) if ess > 0 else np.inf  # ESS grows with the kept length
+    missing = 1.1 * max(by_tau, by_ess) - sampled
+    if not np.isfinite(missing):
+        return chunk
+    return min(chunk, max(min_chunk, int(np.ceil(round(missing, 6)))))  # round: 1.1 * 900 is 990.0000000000001
+
+
 def initial_walkers(
     posterior: Posterior, centre: np.ndarray, covariance: np.ndarray, n_walkers: int, seed: int, ensemble: int = 0
 ):
@@ -370,8 +396,9 @@ def sample(
 ) -> SampleResult:
     """Run ``n_ensembles`` independent emcee ensembles of ``n_walkers`` walkers on ``posterior``, each started
     from its own draws of N(``centre``, :data:`START_INFLATION`^2 ``covariance``) in theta space (overdispersed,
-    so that R-hat can reveal an ensemble stuck in its start): ``warmup`` steps of warm-up, then chunks of
-    ``chunk`` steps until converged (:func:`convergence`) or ``max_steps`` in all (see the module docstring).
+    so that R-hat can reveal an ensemble stuck in its start): ``warmup`` steps of warm-up, then chunks of at
+    most ``chunk`` steps (:func:`planned_chunk`) until converged (:func:`convergence`) or ``max_steps`` in all
+    (see the module docstring).
     ``n_walkers``: see :func:`walker_count`. ``log(message)`` reports each round and chunk."""
     start_time = time.perf_counter()
     ndim = posterior.ndim
@@ -415,7 +442,15 @@ def sample(
     while chain.shape[0] < max_steps:
         done = chain.shape[0]
         in_warmup = done < warmup
-        n = min(next(b for b in bounds if b > done) - done if in_warmup else chunk, max_steps - done)
+        if result is None and done > warmup:  # resumed after a chunk: plan the next one as the run would have
+            result = convergence(chain, posterior.names, start=warmup, n_ensembles=n_ensembles)
+            if result.converged:
+                break
+        if in_warmup:
+            n = next(b for b in bounds if b > done) - done
+        else:
+            n = chunk if result is None else planned_chunk(result, done, warmup, chunk)
+        n = min(n, max_steps - done)
         t0 = time.perf_counter()
         label = "warm-up" if in_warmup else "steps"
         parts, part_lps, acceptance, random_states = [], [], [], []

@@ -1,0 +1,108 @@
+"""The main job's cost: `peano-bayes run` from a fresh clone with an empty compilation cache, ours beside a
+reference commit, one after the other on this machine.
+
+    python experiments/bench_main_job.py [--reference REF] [--materials TP FC ...] [--jobs 2] [--max-steps N]
+
+For each of HEAD and ``--reference`` (if given) the repository is cloned into a temporary folder and checked
+out there, and ``python -m peano_bayes run`` runs in the clone with this interpreter's packages (the versions
+``constraints.txt`` pins; building a virtual environment per clone would time pip, not the job), a fresh
+``PEANO_BAYES_CACHE`` (so every program compiles from nothing) and the given options. The wall time is the
+whole command's. Per material, from its ``summary.json``: the stage times (least squares, mode, compile,
+sampling), steps, tau_max, max R-hat, min bulk and tail ESS and whether it converged; a material without a
+summary (the run failed) is reported as missing. The last line is one JSON object with both runs and, when
+both ran, the ratio of their wall times (reference / ours). ``--keep DIR`` keeps the result folders.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+MATERIALS = ("TP", "P", "PR", "TPC", "PC", "PCS", "TFC", "FC")
+
+
+def material_figures(summary: dict) -> dict:
+    """Stage times [s], steps and convergence figures of one material's ``summary.json``."""
+    conv = summary.get("convergence", {})
+    per = lambda key: list((conv.get(key) or {}).values())  # noqa: E731
+    return {
+        "stages_s": {k: round(float(v), 1) for k, v in summary.get("timings_s", {}).items()},
+        "steps": summary.get("steps"),
+        "tau_max": max(per("tau_steps"), default=None),
+        "max_rhat": max(per("rhat"), default=None),
+        "min_ess_bulk": min(per("ess_bulk"), default=None),
+        "min_ess_tail": min(per("ess_tail"), default=None),
+        "converged": bool(conv.get("converged", False)),
+    }
+
+
+def run_at(ref: str, materials, options: list[str], keep: Path | None) -> dict:
+    """Clone ``ref`` into a temporary folder, run the main job there, and collect its figures."""
+    with tempfile.TemporaryDirectory(prefix="bench_main_job_") as tmp:
+        clone = Path(tmp) / "clone"
+        subprocess.run(["git", "clone", "--quiet", "--no-hardlinks", str(REPO), str(clone)], check=True)
+        subprocess.run(["git", "-C", str(clone), "checkout", "--quiet", ref], check=True)
+        commit = subprocess.run(
+            ["git", "-C", str(clone), "rev-parse", "--short", "HEAD"], check=True, capture_output=True, text=True
+        ).stdout.strip()
+        out = Path(tmp) / "results"
+        env = {**os.environ, "PYTHONPATH": str(clone), "PEANO_BAYES_CACHE": str(Path(tmp) / "cache")}
+        cmd = [sys.executable, "-m", "peano_bayes", "run", "--out", str(out), "--materials", *materials, *options]
+        print(f"{ref} ({commit}): {' '.join(cmd[1:])}", file=sys.stderr, flush=True)
+        t0 = time.perf_counter()
+        status = subprocess.run(cmd, cwd=clone, env=env).returncode
+        wall = time.perf_counter() - t0
+        per = {}
+        for code in materials:
+            path = out / code / "summary.json"
+            per[code] = material_figures(json.loads(path.read_text())) if path.exists() else {"missing": True}
+        if keep is not None:
+            shutil.copytree(out, keep / commit, dirs_exist_ok=True)
+        return {"ref": ref, "commit": commit, "exit_status": status, "wall_s": round(wall, 1), "materials": per}
+
+
+def table(run: dict) -> str:
+    lines = [f"{run['ref']} ({run['commit']}): {run['wall_s']:.0f} s, exit {run['exit_status']}"]
+    for code, m in run["materials"].items():
+        if m.get("missing"):
+            lines.append(f"  {code:4s} no summary")
+            continue
+        stages = ", ".join(f"{k.removesuffix('_s')} {v:.0f}" for k, v in m["stages_s"].items())
+        lines.append(
+            f"  {code:4s} {m['steps']} steps, tau_max {m['tau_max']:.1f}, R-hat {m['max_rhat']:.3f}, "
+            f"ESS {m['min_ess_bulk']:.0f}/{m['min_ess_tail']:.0f}, converged {m['converged']}; {stages} s"
+        )
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--reference", help="git ref of the code to compare with (omit: ours only)")
+    parser.add_argument("--materials", nargs="+", default=list(MATERIALS))
+    parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--max-steps", type=int, help="step limit per material (default: the run command's)")
+    parser.add_argument("--keep", type=Path, help="copy each run's results folder into KEEP/<commit>/")
+    args = parser.parse_args(argv)
+    options = ["--jobs", str(args.jobs), "--no-progress"]
+    if args.max_steps:
+        options += ["--max-steps", str(args.max_steps)]
+    runs = {"ours": run_at("HEAD", args.materials, options, args.keep)}
+    print(table(runs["ours"]), flush=True)
+    if args.reference:
+        runs["reference"] = run_at(args.reference, args.materials, options, args.keep)
+        print(table(runs["reference"]), flush=True)
+        runs["wall_ratio_reference_over_ours"] = round(runs["reference"]["wall_s"] / runs["ours"]["wall_s"], 2)
+    print(json.dumps({"materials": args.materials, "jobs": args.jobs, "cores": os.cpu_count(), **runs}))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
