@@ -38,8 +38,10 @@ from .inference.posterior import CONTRAST_PREFIX, DEFAULT_HELD, SPECIMEN_SD, bui
 from .inference.priors import load_prior
 from .inference.results import (
     NEW_SPECIMEN_PREFIX,
+    RIDGE_CORRELATION,
     parameter_table,
     posterior_contraction,
+    posterior_ridges,
     to_inference_data,
     write_netcdf,
 )
@@ -344,6 +346,7 @@ def infer(
         if posterior.varying
         else {},
         "contraction": posterior_contraction(idata, posterior.prior.names),
+        "ridges": posterior_ridges(idata, posterior.prior.names),
         "units": posterior.units,
         "fixed": posterior.fixed,
         "fit_quality_least_squares": fitted["quality"],
@@ -372,6 +375,31 @@ def infer(
         material_figures(out, dataset)
         log(f"{code}: figures in {out / 'figures'}")
     return summary
+
+
+def ridge_lines(ridges: list[dict]) -> list[str]:
+    """``index.md`` lines naming each ridge of :func:`~peano_bayes.inference.results.posterior_ridges`: the
+    pair, its correlation, and the combination the data determine against each parameter alone."""
+    if not ridges:
+        return []
+    lines = [
+        "",
+        f"**Ridges** (posterior correlation beyond {RIDGE_CORRELATION:g}): the tests determine a combination of "
+        "each pair better than either alone; read their intervals together.",
+        "",
+    ]
+    for r in ridges:
+        spread = lambda sd, log: f"±{100 * sd:.2g} %" if log else f"±{sd:.2g}"  # noqa: E731
+        if r["log_a"] and r["log_b"]:
+            combination = f"{r['a']} × {r['b']}^{r['exponent']:.2f}"
+        else:  # a signed parameter: the combination in the sampler's scale (logs of the positive ones)
+            combination = f"{r['a']} {'+' if r['exponent'] >= 0 else '-'} {abs(r['exponent']):.2f} {r['b']}"
+        lines.append(
+            f"- {r['a']} and {r['b']}: correlation {r['correlation']:+.2f}; {combination} is determined to "
+            f"{spread(r['sd_combination'], r['log_a'] and r['log_b'])} (1 sd), each alone to "
+            f"{spread(r['sd_a'], r['log_a'])} and {spread(r['sd_b'], r['log_b'])}."
+        )
+    return lines
 
 
 def model_table(summaries: list[dict]) -> list[str]:
@@ -469,6 +497,7 @@ def index_markdown(
                 f"**Posterior close to its prior** (contraction below {WEAKLY_INFORMED:g}): {', '.join(weak)}. "
                 "The fitted tests say little about these; their intervals are mostly the prior's.",
             ]
+        lines += ridge_lines(s.get("ridges", []))
         lines += ["", "| test | RMSE | max error | R² |", "|---|---|---|---|"]
         for test, q in s["fit_quality_posterior_mean"].items():
             lines.append(

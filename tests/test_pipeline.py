@@ -52,3 +52,25 @@ def test_results_page_shows_population_new_specimen_and_weakly_informed_paramete
     assert "| tensile_ka_n_per_m | N/m | 500 | 480 to 520 | 450 to 560 | 0.99 | 1.002 | 3000 |" in page
     assert "**Posterior close to its prior** (contraction below 0.5): specimen_log_sd." in page
     assert "close to its prior" not in index_markdown([_summary(0.8)])
+
+
+def test_a_ridge_is_named_with_the_combination_the_data_determine():
+    import arviz as az
+    import numpy as np
+
+    from peano_bayes.inference.results import posterior_ridges
+
+    rng = np.random.default_rng(5)
+    z, e = rng.normal(0.0, 0.1, (4, 2000)), rng.normal(0.0, 0.001, (4, 2000))
+    # log b = -0.5 log a + e: a * b^2 = exp(2 e), relative sd 0.002; c is independent and signed (not logged)
+    draws = {"a": np.exp(z), "b": np.exp(-0.5 * z + e), "c": rng.normal(-1.0, 1.0, (4, 2000))}
+    ridges = posterior_ridges(az.from_dict(posterior=draws), ["a", "b", "c"])
+    assert [(r["a"], r["b"]) for r in ridges] == [("a", "b")]
+    r = ridges[0]
+    assert r["correlation"] < -0.99 and r["log_a"] and r["log_b"]
+    np.testing.assert_allclose(r["exponent"], 2.0, rtol=0.01)
+    np.testing.assert_allclose(r["sd_combination"], 0.002, rtol=0.05)
+    np.testing.assert_allclose([r["sd_a"], r["sd_b"]], [0.1, 0.05], rtol=0.05)
+    page = index_markdown([{**_summary(0.9), "ridges": ridges}])
+    assert "- a and b: correlation -1.00; a × b^2.00 is determined to ±0.2 % (1 sd), each alone to ±10 %" in page
+    assert "Ridges" not in index_markdown([_summary(0.9)])

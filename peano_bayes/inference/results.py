@@ -196,6 +196,56 @@ def posterior_contraction(idata, names) -> dict[str, float]:
     return out
 
 
+#: Posterior correlation (in the sampler's scale) beyond which two parameters are reported as a ridge.
+RIDGE_CORRELATION = 0.9
+
+
+def posterior_ridges(idata, names, threshold: float = RIDGE_CORRELATION) -> list[dict]:
+    """The pairs of ``names`` whose population posteriors are correlated beyond ``threshold`` (in the log of
+    the value for positive parameters, as :func:`posterior_contraction`): ridges the fitted tests cannot
+    resolve along their length. For each pair ``a``, ``b``: ``correlation``; ``sd_a``, ``sd_b`` the posterior
+    sd of each alone; and the combination the data do determine, the pair's direction of least posterior
+    variance, written ``a * b^exponent`` (for log-scaled parameters, so ``sd_combination`` is a relative sd
+    when small) with its sd. Sorted by |correlation|, strongest first."""
+    columns, logged, kept = [], [], []
+    for name in names:
+        if name not in idata.posterior:
+            continue
+        values = np.asarray(idata.posterior[name].values, float).reshape(-1)
+        positive = bool(np.all(values > 0))
+        columns.append(np.log(values) if positive else values)
+        logged.append(positive)
+        kept.append(name)
+    if len(kept) < 2:
+        return []
+    draws = np.vstack(columns)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = np.corrcoef(draws)
+    out = []
+    for i in range(len(kept)):
+        for j in range(i + 1, len(kept)):
+            r = float(corr[i, j])
+            if not np.isfinite(r) or abs(r) < threshold:
+                continue
+            cov = np.cov(draws[[i, j]])
+            values, vectors = np.linalg.eigh(cov)
+            direction = vectors[:, 0]  # least variance
+            out.append(
+                {
+                    "a": kept[i],
+                    "b": kept[j],
+                    "log_a": logged[i],
+                    "log_b": logged[j],
+                    "correlation": r,
+                    "sd_a": float(np.sqrt(cov[0, 0])),
+                    "sd_b": float(np.sqrt(cov[1, 1])),
+                    "exponent": float(direction[1] / direction[0]),
+                    "sd_combination": float(np.sqrt(values[0]) / abs(direction[0])),
+                }
+            )
+    return sorted(out, key=lambda ridge: -abs(ridge["correlation"]))
+
+
 # --- reading a result -----------------------------------------------------------------------------------------
 
 
@@ -263,7 +313,6 @@ def parameter_draws(
     return sets, prior_only
 
 
-
 def load_result(path: str | Path):
     """The arviz InferenceData of a result: ``path`` is a ``posterior.nc`` file or a directory holding one.
     Raises :class:`~peano_bayes.errors.PeanoBayesInputError` naming the file and what is wrong."""
@@ -298,6 +347,7 @@ __all__ = [
     "parameter_table",
     "physical_draws",
     "posterior_contraction",
+    "posterior_ridges",
     "result_config",
     "to_inference_data",
     "write_netcdf",
