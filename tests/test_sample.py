@@ -120,10 +120,11 @@ def test_warmup_rounds_and_the_proposal_in_force():
     assert warmup_rounds(10) == [0, 4, 8, 10]
     chain = np.random.default_rng(0).normal(size=(300, 8, 2))
     assert proposal_at(chain, 99, 300) is None
-    p = proposal_at(chain, 250, 300)  # fitted to steps 150-199 of round two
-    np.testing.assert_allclose(p.mean, chain[150:200].reshape(-1, 2).mean(axis=0))
-    later = proposal_at(chain, 5000, 300)  # frozen after the warm-up: the last round's second half
-    np.testing.assert_allclose(later.mean, chain[250:300].reshape(-1, 2).mean(axis=0))
+    p = proposal_at(chain, 250, 300)  # after round two (step 200): fitted to steps 100-199
+    np.testing.assert_allclose(p.mean, chain[100:200].reshape(-1, 2).mean(axis=0))
+    later = proposal_at(chain, 5000, 300)  # frozen after the warm-up: its second half, steps 150-299
+    np.testing.assert_allclose(later.mean, chain[150:300].reshape(-1, 2).mean(axis=0))
+    np.testing.assert_allclose(later.covariance, np.cov(chain[150:300].reshape(-1, 2).T))
 
 
 def test_a_step_limit_inside_the_warmup_says_so():
