@@ -34,7 +34,9 @@ def test_sampled_parameters_follow_the_tests_and_specimens(stroke_data):
     assert "noise_load_cycle_force_n" not in post.names
     # one contrast (two specimens) per sampled parameter that differs between specimens
     varying = {"tensile_ka_n_per_m", "tensile_kb_n_per_m2", "bending_k1_n", "bending_k2_n", "extension_k_n_per_m"}
+    varying |= {"friction_stiffness_n_per_m"}  # the rig draws it per specimen too
     assert set(post.varying) == varying & set(post.prior.names)
+    assert "friction_stiffness_n_per_m" in post.varying
     assert post.ndim == post.prior.ndim + len(post.varying)
     one = simulate_dataset("TP", None, seed=1, specimens=1, repeats=1, tests=("stroke",))
     single = build_posterior(prepare(one), prior_for("TP"))
