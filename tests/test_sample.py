@@ -253,7 +253,7 @@ def test_convergence_of_a_chain_with_a_walker_that_never_moved_is_a_verdict_not_
 
 
 @pytest.mark.slow
-# The notebook's fast setting fits the same shapes (two TP load cycles, 16 walkers): in one group, whichever runs
+# The notebook's fast setting fits the same shapes (two TP load cycles, 18 walkers): in one group, whichever runs
 # second reads the other's compiled programs from the persistent cache.
 @pytest.mark.xdist_group("fit_tp_two_cycles")
 def test_killed_fit_resumes_without_losing_a_chunk(tmp_path):
@@ -276,7 +276,7 @@ def test_killed_fit_resumes_without_losing_a_chunk(tmp_path):
         "--starts",
         "2",
         "--walkers",
-        "16",
+        "18",  # twice the 9 sampled parameters
         "--ensembles",
         "2",
         "--chunk",
