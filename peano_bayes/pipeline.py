@@ -210,7 +210,7 @@ def infer(
     (default :data:`DEFAULT_TESTS`). The least-squares point is polished to the posterior mode, first with the
     driving inputs taken as exact (:func:`~peano_bayes.inference.laplace.posterior_mode`), then on the full
     likelihood (:func:`~peano_bayes.inference.laplace.refine_mode`); sampling runs ``warmup`` steps of warm-up, then
-    chunks of ``chunk`` steps until converged or ``max_steps`` (see
+    chunks of at most ``chunk`` steps until converged or ``max_steps`` (see
     :func:`~peano_bayes.inference.sample.sample`). ``resume`` continues an interrupted run.
     ``sample_all`` also samples the shape constants held by default
     (:data:`~peano_bayes.inference.posterior.DEFAULT_HELD`). ``discover``: first run discovery on the data

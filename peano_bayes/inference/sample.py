@@ -65,12 +65,10 @@ MIN_ENSEMBLES = 4
 START_INFLATION = 2.0
 #: Moves before any proposal is fitted (emcee's recommended differential-evolution mix).
 MOVES = ((emcee.moves.DEMove, 0.8), (emcee.moves.DESnookerMove, 0.2))
-#: Weights once the independence proposal is fitted: DE, snooker, independence. Measured on the bundled PR
-#: data, four ensembles of 34 walkers, 500 steps after one 300-step warm-up from the refined mode (tau_max; the
-#: four ensembles' tau): the earlier kernel (weights 0.55/0.15/0.3, df 5, fitted to the last round's second
-#: half) 21.4; fitted to the warm-up's second half with df 20, 18.0 (14.5-18.0); and these weights 16.2
-#: (12.2-16.2), max R-hat 1.005. An independence-only kernel gets stuck where the ellipse under-covers the
-#: tails (on TP, from a poorer start, weight 0.6 gave R-hat 1.126); the DE moves carry such walkers back.
+#: Weights once the independence proposal is fitted: DE, snooker, independence. The independence move
+#: decorrelates a walker in one accepted step where the posterior is near elliptical (on PR, with the proposal
+#: of :func:`proposal_at`, tau_max 16.2 over 500 steps against 18.0 with weight 0.3); the DE moves carry back
+#: walkers from the tails, where the ellipse under-covers and an independence-only kernel gets stuck.
 ADAPTED_MOVES = (0.4, 0.1, 0.5)
 #: Degrees of freedom of the fitted multivariate-t proposal. On PR the independence move's acceptance, against
 #: posterior draws, was 0.41 with df 5 and 0.55 with df 20 for one proposal (100: 0.67 for one fitted to
