@@ -12,8 +12,10 @@ are ``discrepancy-10000/`` (seeds 10000-10021, SNR 2, the defaults) and ``discre
 11000-11021, ``--snr 4``, the eight effects only), each with its ``PREREGISTRATION.md``. A final run of any
 later workflow change starts at ``--first-seed 12000``.
 
-Resumable: every finished run is one line of ``OUT/runs-<worker>.jsonl``; a rerun skips what is there (the
-committed runs store these rows gzip-compressed, ``runs-<worker>.jsonl.gz``, and are read the same way). Writes
+Runs are work units of ``peano_bayes.fanout`` (``--jobs`` local processes, or a Dask cluster with
+``--scheduler``). Resumable: this process appends every finished run as one line of ``OUT/runs.jsonl``; a rerun
+skips what is there (earlier runs wrote one ``runs-<worker>.jsonl`` per worker, and the committed ones store
+their rows gzip-compressed, ``runs-<worker>.jsonl.gz``; all are read the same way). Writes
 ``OUT/confusion.csv``, ``OUT/recall.csv``, ``OUT/false_positives.csv``, ``OUT/gap.csv``, ``OUT/BENCHMARK.md``
 and prints one JSON object as its last line.
 
@@ -24,12 +26,8 @@ from __future__ import annotations
 
 import argparse
 import gzip
-import hashlib
 import json
-import shutil
-import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -37,7 +35,17 @@ import pandas as pd
 
 from peano_bayes import enable_compilation_cache
 from peano_bayes.atomic import write_text
-from peano_bayes.validation.discovery_benchmark import HIDEABLE, NOT_HIDEABLE, Case, strength_for_snr
+from peano_bayes.errors import PeanoBayesInputError
+from peano_bayes.fanout import Unit, make_executor, run_units
+from peano_bayes.validation.discovery_benchmark import (
+    HIDEABLE,
+    NOT_HIDEABLE,
+    Case,
+    failed_row,
+    run_case,
+    run_key,
+    strength_for_snr,
+)
 from peano_bayes.validation.sbc import wilson_interval
 
 HERE = Path(__file__).resolve().parent
@@ -53,36 +61,6 @@ def cases(snrs, noise_levels, only=None) -> list[Case]:
     out += [Case(force_sd_n=sd) for sd in noise_levels]
     out += [Case(drift=True), Case(TWO_EFFECTS, max(snrs))]
     return [c for c in out if only is None or c.label in only]
-
-
-def key(case: Case, seed: int) -> str:
-    return f"{case.label}|{case.snr:g}|{case.force_sd_n:g}|{int(case.drift)}|{seed}"
-
-
-def _one(case: Case, seed: int, strengths: dict) -> dict:
-    enable_compilation_cache()
-    from peano_bayes.discovery import discover, discovery_data
-    from peano_bayes.validation.discovery_benchmark import hidden_dataset, score
-
-    start = time.perf_counter()
-    dataset = hidden_dataset(case, seed, {e: strengths[e] for e in case.effects})
-    result = discover(discovery_data(dataset), seed=seed)
-    row = score(case, result.report)
-    row.update(
-        key=key(case, seed),
-        effects=list(case.effects),
-        snr=case.snr,
-        force_sd_n=case.force_sd_n,
-        drift=case.drift,
-        seed=seed,
-        verdict=result.report["verdict"],
-        named=result.report["named"],
-        noise_model=result.report["noise_model"],
-        screened=result.report["screened"],
-        diagnoses=result.report["diagnoses"],
-        seconds=time.perf_counter() - start,
-    )
-    return row
 
 
 def _calibrate(out: Path, all_cases) -> dict:
@@ -121,71 +99,36 @@ def _todo(out: Path, snrs, noise_levels, seeds: int, first_seed: int, only=None)
         (case, s)
         for s in range(first_seed, first_seed + seeds)
         for case in cases(snrs, noise_levels, only)
-        if key(case, s) not in done
+        if run_key(case, s) not in done
     ]
 
 
-def _claim(out: Path, run_key: str) -> bool:
-    """Atomically claim ``run_key`` for this worker (False if another worker has it): workers take runs from one
-    shared to-do list as they become free, so none idles while the other still has a long queue."""
-    try:
-        (out / "claims" / hashlib.md5(run_key.encode()).hexdigest()).touch(exist_ok=False)
-    except FileExistsError:
-        return False
-    return True
-
-
-def work(out: Path, snrs, noise_levels, seeds: int, first_seed: int, index: int, count: int, only=None) -> None:
-    """Worker ``index`` of ``count``: claim each run not done yet (see :func:`_claim`), run it and append it to
-    ``OUT/runs-<index>.jsonl`` as it finishes."""
-    strengths = json.loads((out / "strengths.json").read_text())
-    todo = _todo(out, snrs, noise_levels, seeds, first_seed, only)
-    with open(out / f"runs-{index}.jsonl", "a") as fh:
-        for i, (case, seed) in enumerate(todo, 1):
-            if not _claim(out, key(case, seed)):
-                continue
-            by_case = {e: strengths[f"{e}@{case.snr:g}"] for e in case.effects}
-            try:
-                row = _one(case, seed, by_case)
-            except Exception as err:  # recorded, not hidden: a failed run counts as wrong
-                row = {
-                    "key": key(case, seed), "label": case.label, "snr": case.snr, "force_sd_n": case.force_sd_n,
-                    "drift": case.drift, "seed": seed, "outcome": f"error: {type(err).__name__}: {err}"[:200],
-                    "correct": False, "false_positive": False, "gap_ratio": float("nan"),
-                    "effects": list(case.effects),
-                }  # fmt: skip
-            fh.write(json.dumps(row) + "\n")
-            fh.flush()
-            print(
-                f"worker {index} (to-do item {i} of {len(todo)}) {row['label']} snr {row['snr']:g} seed {seed}: "
-                f"{row['outcome']} ({'right' if row['correct'] else 'WRONG'})",
-                flush=True,
-            )
-
-
-def run(out: Path, snrs, noise_levels, seeds: int, first_seed: int, jobs: int, only=None) -> list[dict]:
-    """Calibrate the strengths, then run the to-do list in ``jobs`` worker processes (one compilation each; the
-    second starts after the first has filled the on-disk compilation cache)."""
+def run(out: Path, snrs, noise_levels, seeds: int, first_seed: int, jobs: int, only=None, scheduler=None) -> list[dict]:
+    """Calibrate the strengths, then run the to-do list as work units of ``peano_bayes.fanout`` (``jobs`` local
+    processes, or the Dask cluster of ``scheduler``). This process alone appends each finished run to
+    ``OUT/runs.jsonl``; a run that raised is recorded as a wrong row, not hidden."""
     out.mkdir(parents=True, exist_ok=True)
-    _calibrate(out, cases(snrs, noise_levels, only))
+    strengths = _calibrate(out, cases(snrs, noise_levels, only))
     todo = _todo(out, snrs, noise_levels, seeds, first_seed, only)
     print(f"{len(_read_rows(out))} runs done, {len(todo)} to go", flush=True)
-    # Claims of a stopped run are stale: its unfinished runs are in the to-do list again.
-    shutil.rmtree(out / "claims", ignore_errors=True)
-    (out / "claims").mkdir()
-    common = [sys.executable, __file__, "--out", str(out), "--seeds", str(seeds), "--first-seed", str(first_seed),
-              "--snr", *map(str, snrs), "--noise", *map(str, noise_levels),
-              *(["--cases", *only] if only else [])]  # fmt: skip
-    procs = []
-    for index in range(min(jobs, max(len(todo), 1))):
-        procs.append(subprocess.Popen(common + ["--worker", str(index), str(jobs)]))
-        if index == 0 and jobs > 1:
-            log = out / "runs-0.jsonl"
-            size = log.stat().st_size if log.exists() else 0
-            while procs[0].poll() is None and (not log.exists() or log.stat().st_size == size):
-                time.sleep(5)
-    for proc in procs:
-        proc.wait()
+    units = [
+        Unit(run_key(case, seed), run_case, (case, seed, {e: strengths[f"{e}@{case.snr:g}"] for e in case.effects}))
+        for case, seed in todo
+    ]
+    by_key = {run_key(case, seed): (case, seed) for case, seed in todo}
+
+    with open(out / "runs.jsonl", "a") as fh:
+
+        def finished(outcome):
+            row = outcome.value if outcome.ok else failed_row(*by_key[outcome.key], outcome.error)
+            fh.write(json.dumps(row) + "\n")
+            fh.flush()
+            print(f"{row['label']} snr {row['snr']:g} seed {row['seed']}: {row['outcome']} "
+                  f"({'right' if row['correct'] else 'WRONG'})", flush=True)  # fmt: skip
+
+        with make_executor(scheduler, jobs) as (executor, info):
+            print(f"runs on {info.describe()}", flush=True)
+            run_units(units, executor, on_result=finished, log=print)
     return list(_read_rows(out).values())
 
 
@@ -298,7 +241,8 @@ def main(argv=None) -> int:
     parser.add_argument("--noise", type=float, nargs="+", default=[0.1, 0.2, 0.4], help="force noise levels [N]")
     parser.add_argument("--seeds", type=int, default=22, help="seeds per case")
     parser.add_argument("--first-seed", type=int, default=10000)
-    parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--jobs", type=int, default=2, help="local worker processes")
+    parser.add_argument("--scheduler", default=None, help="Dask scheduler: local:N or tcp://HOST:8786")
     parser.add_argument(
         "--cases",
         nargs="+",
@@ -314,20 +258,19 @@ def main(argv=None) -> int:
         metavar="DIR",
         help="with --analyse-only: also read the runs of these directories (the --cases among them)",
     )
-    parser.add_argument("--worker", type=int, nargs=2, metavar=("INDEX", "COUNT"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     enable_compilation_cache()
     out = Path(args.out)
-    if args.worker:
-        work(out, args.snr, args.noise, args.seeds, args.first_seed, *args.worker, only=args.cases)
-        return 0
     if args.pool and not args.analyse_only:
         parser.error("--pool needs --analyse-only")
     if args.analyse_only:
         sources = [d for d in [out, *map(Path, args.pool)] if _read_rows(d)]
         rows = [r for d in sources for r in _read_rows(d).values() if args.cases is None or r["label"] in args.cases]
     else:
-        rows = run(out, args.snr, args.noise, args.seeds, args.first_seed, args.jobs, args.cases)
+        try:
+            rows = run(out, args.snr, args.noise, args.seeds, args.first_seed, args.jobs, args.cases, args.scheduler)
+        except PeanoBayesInputError as err:
+            parser.error(str(err))
     out.mkdir(parents=True, exist_ok=True)
     pooled_from = [str(d.resolve().relative_to(HERE.parent)) for d in sources] if args.pool else []
     figures = analyse(rows, out, pooled_from)

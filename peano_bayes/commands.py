@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -358,32 +359,89 @@ fit_command.arguments = _fit_arguments
 
 @command("run", "the main job: every bundled material, fit + sample into results/ with results/index.md")
 def run(args):
-    from .pipeline import run_bundled
-
     options = _check_sampling(args)
+    fanout = _fanout_options(args)
     materials = tuple(args.materials)
     unknown = [m for m in materials if m not in bundled.MATERIALS]
     if unknown:
         raise PeanoBayesInputError(f"unknown material(s) {', '.join(unknown)}; bundled: {' '.join(bundled.MATERIALS)}")
+    from .pipeline import run_bundled
+
+    summaries = run_bundled(args.out, materials=materials, **fanout, **options)
+    return _many_report("run", args.out, summaries, "materials")
+
+
+def _fanout_options(args) -> dict:
+    """``jobs`` and ``scheduler`` of a fan-out command, checked (a bad scheduler exits 2 before anything runs)."""
+    from .fanout import SCHEDULER_ENV, parse_scheduler
+
     if args.jobs < 1:
         raise PeanoBayesInputError(f"--jobs must be >= 1, got {args.jobs}")
-    summaries = run_bundled(args.out, materials=materials, jobs=args.jobs, **options)
+    parse_scheduler(args.scheduler if args.scheduler is not None else os.environ.get(SCHEDULER_ENV))
+    return {"jobs": args.jobs, "scheduler": args.scheduler}
+
+
+def _many_report(name: str, out, summaries: list[dict], what: str) -> dict:
     reports = [_report(s) for s in summaries]
-    bad = [r["material"] for r in reports if not r["converged"]]
-    print(f"wrote {args.out}/index.md: {len(reports) - len(bad)} of {len(reports)} materials converged")
+    bad = [r["label"] for r in reports if not r["converged"]]
+    print(f"wrote {out}/index.md: {len(reports) - len(bad)} of {len(reports)} {what} converged")
     if bad:
-        print(f"peano-bayes run: WARNING: NOT CONVERGED: {', '.join(bad)} (see {args.out}/index.md)", file=sys.stderr)
-    return {"materials": reports, "converged": not bad}
+        print(f"peano-bayes {name}: WARNING: NOT CONVERGED: {', '.join(bad)} (see {out}/index.md)", file=sys.stderr)
+    return {what: reports, "converged": not bad}
+
+
+def _fanout_arguments(p, what: str) -> None:
+    p.add_argument(
+        "--jobs", type=int, default=2, help=f"{what} run at once, one local worker process each (default: 2)"
+    )
+    p.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="SPEC",
+        help="run on Dask instead of local processes: 'local:N' starts a LocalCluster of N workers, "
+        "'tcp://HOST:8786' uses a running cluster (default: $PEANO_BAYES_SCHEDULER, else local processes; "
+        "needs dask.distributed; see docs/scaling.md)",
+    )
 
 
 def _run_arguments(p):
     p.add_argument("--out", default="results", metavar="DIR", help="output directory (default: results)")
     p.add_argument("--materials", nargs="+", default=list(bundled.MATERIALS), metavar="CODE", help="subset to run")
-    p.add_argument("--jobs", type=int, default=2, help="materials run at once, one process each (default: 2)")
+    _fanout_arguments(p, "materials")
     _sampling_arguments(p)
 
 
 run.arguments = _run_arguments
+
+
+@command("fit-many", "several datasets: 'fit' on each into --out DIR/<file stem>/, in parallel or on Dask")
+def fit_many_command(args):
+    options = _check_sampling(args)
+    fanout = _fanout_options(args)
+    paths = [bundled.resolve_dataset(d) for d in args.data]
+    from .pipeline import fit_many
+
+    summaries = fit_many(paths, args.out, prior=args.prior, **fanout, **options)
+    return _many_report("fit-many", args.out, summaries, "datasets")
+
+
+def _fit_many_arguments(p):
+    p.add_argument(
+        "data",
+        nargs="+",
+        metavar="DATA",
+        help="rig datasets, each a CSV with its TOML sidecar (or its stem) or a bundled material code; their names "
+        "must differ",
+    )
+    p.add_argument("--out", required=True, metavar="DIR", help="output directory (results go to DIR/<file stem>/)")
+    p.add_argument(
+        "--prior", metavar="FILE.toml", default=None, help="one prior file for all (default: each sidecar's material)"
+    )
+    _fanout_arguments(p, "datasets")
+    _sampling_arguments(p)
+
+
+fit_many_command.arguments = _fit_many_arguments
 
 
 @command("prior", "priors: 'prior new --like CODE --out FILE.toml' writes a starting prior to edit")

@@ -629,10 +629,12 @@ def report_results(out_dir: str | Path, materials=BUNDLED_MATERIALS, *, n_draws:
     return ranking or {}
 
 
-def _infer_bundled(code: str, out_dir: str, kwargs: dict) -> dict:
-    """One material of :func:`run_bundled` (top level, so a spawned worker process can run it)."""
-    resume = (Path(out_dir) / code / "sampler_state.npz").exists()
-    return infer(bundled.dataset_path(code), out_dir, resume=resume, **kwargs)
+def _infer_unit(source: str, out_dir: str, label: str, kwargs: dict) -> dict:
+    """One dataset of a fan-out (:func:`run_bundled`, :func:`fit_many`): :func:`infer` into ``out_dir/label``,
+    resumed from its sampler state if one is there (a unit re-run after its worker was lost continues from its
+    last saved chunk). Top level, so a worker process can import it."""
+    resume = (Path(out_dir) / label / "sampler_state.npz").exists()
+    return infer(source, out_dir, label=label, resume=resume, **kwargs)
 
 
 def _can_continue(summary: dict, directory: Path, max_steps: int) -> bool:
@@ -659,8 +661,66 @@ class RunLog:
             f.write(f"{stamp} {message}\n")
 
 
+def _infer_all(
+    items: list[tuple[str, str]], out_dir: Path, *, jobs: int, scheduler: str | None, log, kwargs: dict
+) -> list[dict]:
+    """:func:`infer` on each ``(label, data file)`` of ``items`` into ``out_dir/label`` as work units of
+    :func:`~peano_bayes.fanout.run_units`, and the summaries in the order of ``items``. A label whose
+    ``summary.json`` exists is not redone unless its chain can continue (:func:`_can_continue`). Writes
+    ``out_dir/provenance.json``; raises after the others finished if any unit failed."""
+    from .fanout import Unit, make_executor, provenance, raise_failures, run_units
+
+    max_steps = kwargs.get("max_steps", DEFAULT_MAX_STEPS)
+    summaries: dict[str, dict] = {}
+    todo = []
+    for label, source in items:
+        done = out_dir / label / "summary.json"
+        if done.exists():
+            summary = json.loads(done.read_text())
+            if not _can_continue(summary, out_dir / label, max_steps):
+                without = kwargs.get("discover") and (summary.get("model") or {}).get("discovery") is None
+                note = " (it was sampled without discovery: delete it to redo with --discover)" if without else ""
+                log(f"{label}: {done} exists, skipped{note}")
+                summaries[label] = summary
+                continue
+            log(f"{label}: not converged at {summary['steps']} steps; resuming with a larger step limit")
+        todo.append((label, source))
+
+    def finished(outcome):
+        if outcome.ok:
+            summaries[outcome.key] = outcome.value
+            write_text(out_dir / "index.md", index_markdown([summaries[k] for k, _ in items if k in summaries]))
+
+    with make_executor(scheduler, jobs if len(todo) > 1 else 1) as (executor, info):
+        unit_kwargs = {**kwargs, "log": log}
+        if executor is not None:
+            unit_kwargs.update(progress=False, log=RunLog(out_dir / "run.log"))
+            log(f"running {len(todo)} dataset(s) on {info.describe()}")
+        units = [Unit(label, _infer_unit, (str(source), str(out_dir), label, unit_kwargs)) for label, source in todo]
+        outcomes = run_units(
+            units,
+            executor,
+            on_result=finished,
+            log=None if executor is None else log,
+            log_dir=None if executor is None else out_dir / "logs",
+        )
+    record = provenance(info, outcomes, seed=kwargs.get("seed", 0), labels=[k for k, _ in items])
+    earlier = out_dir / "provenance.json"  # units of earlier invocations stay on record
+    if earlier.exists():
+        record["units"] = {**json.loads(earlier.read_text()).get("units", {}), **record["units"]}
+    write_text(earlier, json.dumps(record, indent=1))
+    raise_failures(outcomes, "dataset")
+    return [summaries[k] for k, _ in items if k in summaries]
+
+
 def run_bundled(
-    out_dir: str | Path = "results", *, materials=BUNDLED_MATERIALS, jobs: int = 1, log=print, **kwargs
+    out_dir: str | Path = "results",
+    *,
+    materials=BUNDLED_MATERIALS,
+    jobs: int = 1,
+    scheduler: str | None = None,
+    log=print,
+    **kwargs,
 ) -> list[dict]:
     """The main job: :func:`infer` on every bundled dataset, then metrics, figures, ranking and
     ``out_dir/index.md`` (:func:`report_results`). Every log line also goes, timestamped, to
@@ -668,47 +728,48 @@ def run_bundled(
 
     A material whose ``summary.json`` exists is not redone (delete it to redo), unless its chain is unconverged,
     its sampler state was kept and ``max_steps`` now allows more steps: then, like a run that was interrupted,
-    it resumes. ``jobs`` materials run at once, each in its own process (spawned: JAX must not be forked), with
-    per-chunk log lines instead of progress bars. ``kwargs`` go to :func:`infer`.
+    it resumes. The materials are work units of :func:`~peano_bayes.fanout.run_units`: ``jobs`` at once in local
+    worker processes, or on the Dask cluster of ``scheduler`` (see :func:`~peano_bayes.fanout.make_executor`),
+    with per-chunk log lines instead of progress bars when not run here; each unit's output is kept in
+    ``out_dir/logs/<material>.log`` and the run's provenance (executor, package versions, seed, which worker ran
+    what) in ``out_dir/provenance.json``. ``kwargs`` go to :func:`infer`.
     """
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     log = RunLog(out_dir / "run.log", log)
-    max_steps = kwargs.get("max_steps", DEFAULT_MAX_STEPS)
-    summaries: dict[str, dict] = {}
-    todo = []
-    for code in materials:
-        done = out_dir / code / "summary.json"
-        if done.exists():
-            summary = json.loads(done.read_text())
-            if not _can_continue(summary, out_dir / code, max_steps):
-                without = kwargs.get("discover") and (summary.get("model") or {}).get("discovery") is None
-                note = " (it was sampled without discovery: delete it to redo with --discover)" if without else ""
-                log(f"{code}: {done} exists, skipped{note}")
-                summaries[code] = summary
-                continue
-            log(f"{code}: not converged at {summary['steps']} steps; resuming with a larger step limit")
-        todo.append(code)
-
-    def finished(code, summary):
-        summaries[code] = summary
-        write_text(out_dir / "index.md", index_markdown([summaries[c] for c in materials if c in summaries]))
-
-    if jobs <= 1 or len(todo) <= 1:
-        for code in todo:
-            finished(code, _infer_bundled(code, str(out_dir), {**kwargs, "log": log}))
-    else:
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor, as_completed
-
-        kwargs = {**kwargs, "progress": False, "log": RunLog(out_dir / "run.log")}
-        with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
-            futures = {pool.submit(_infer_bundled, code, str(out_dir), kwargs): code for code in todo}
-            for future in as_completed(futures):
-                finished(futures[future], future.result())
-    ordered = [summaries[c] for c in materials if c in summaries]
+    items = [(code, str(bundled.dataset_path(code))) for code in materials]
+    ordered = _infer_all(items, out_dir, jobs=jobs, scheduler=scheduler, log=log, kwargs=kwargs)
     report_results(out_dir, materials, log=log)
     return ordered
+
+
+def fit_many(
+    data_paths, out_dir: str | Path, *, jobs: int = 1, scheduler: str | None = None, log=print, **kwargs
+) -> list[dict]:
+    """:func:`infer` on each rig dataset of ``data_paths`` into ``out_dir/<file stem>/`` (stems must differ), as
+    work units like :func:`run_bundled`'s (``jobs`` local processes or a Dask ``scheduler``; resumable; finished
+    ones skipped; ``out_dir/run.log``, ``out_dir/logs/``, ``out_dir/provenance.json``), then
+    ``out_dir/index.md`` over them. Every file is read and checked before any unit starts. ``kwargs`` go to
+    :func:`infer`. Returns the summaries in the order given."""
+    paths = [Path(p) for p in data_paths]
+    if not paths:
+        raise PeanoBayesInputError("fit-many needs at least one data file")
+    labels = [_check_label(p.stem) for p in paths]
+    repeated = sorted({k for k in labels if labels.count(k) > 1})
+    if repeated:
+        raise PeanoBayesInputError(
+            f"data files must have distinct names (each names its result folder); repeated: {', '.join(repeated)}"
+        )
+    for path in paths:
+        load(path)  # a bad file is refused before anything runs
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    log = RunLog(out_dir / "run.log", log)
+    items = [(label, str(path)) for label, path in zip(labels, paths, strict=True)]
+    summaries = _infer_all(items, out_dir, jobs=jobs, scheduler=scheduler, log=log, kwargs=kwargs)
+    write_text(out_dir / "index.md", index_markdown(summaries))
+    log(f"wrote {out_dir / 'index.md'}")
+    return summaries
 
 
 __all__ = [
@@ -717,6 +778,7 @@ __all__ = [
     "BUNDLED_MATERIALS",
     "DEFAULT_MAX_STEPS",
     "DEFAULT_TESTS",
+    "fit_many",
     "index_markdown",
     "infer",
     "least_squares",

@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -251,16 +252,69 @@ def score(case: Case, report: dict) -> dict:
     }
 
 
+def run_key(case: Case, seed: int) -> str:
+    """The stable name of one benchmark run (its work-unit key and its row's ``key``)."""
+    return f"{case.label}|{case.snr:g}|{case.force_sd_n:g}|{int(case.drift)}|{seed}"
+
+
+def run_case(case: Case, seed: int, strengths: dict, tests: tuple[str, ...] | None = None) -> dict:
+    """One benchmark run as a work unit of :func:`peano_bayes.fanout.run_units`: the hidden-effect dataset of
+    ``case`` at ``seed`` (``strengths`` by effect), discovery on its ``tests`` (default: all it has), and its
+    JSON-ready scored row (:func:`score` plus the report's verdict, named effects, noise model, screening and
+    diagnoses, and the seconds it took)."""
+    from ..discovery import discover, discovery_data
+
+    start = time.perf_counter()
+    dataset = hidden_dataset(case, seed, {e: strengths[e] for e in case.effects})
+    result = discover(discovery_data(dataset, tests=tests), seed=seed)
+    row = score(case, result.report)
+    row.update(
+        key=run_key(case, seed),
+        effects=list(case.effects),
+        snr=case.snr,
+        force_sd_n=case.force_sd_n,
+        drift=case.drift,
+        seed=seed,
+        verdict=result.report["verdict"],
+        named=result.report["named"],
+        noise_model=result.report["noise_model"],
+        screened=result.report["screened"],
+        diagnoses=result.report["diagnoses"],
+        seconds=time.perf_counter() - start,
+    )
+    return row
+
+
+def failed_row(case: Case, seed: int, error: str) -> dict:
+    """The row of a run that raised: recorded, not hidden (it counts as wrong)."""
+    return {
+        "key": run_key(case, seed),
+        "label": case.label,
+        "snr": case.snr,
+        "force_sd_n": case.force_sd_n,
+        "drift": case.drift,
+        "seed": seed,
+        "outcome": f"error: {error}"[:200],
+        "correct": False,
+        "false_positive": False,
+        "gap_ratio": float("nan"),
+        "effects": list(case.effects),
+    }
+
+
 __all__ = [
     "Case",
     "HIDEABLE",
     "NOT_HIDEABLE",
     "PROTOCOL",
     "TRUTH_CONFIG",
+    "failed_row",
     "hidden_dataset",
     "outcome_label",
     "reference_sigma",
     "rig_noise",
+    "run_case",
+    "run_key",
     "score",
     "snr_by_test",
     "strength_for_snr",

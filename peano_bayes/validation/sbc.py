@@ -14,6 +14,7 @@ the load cell's noise scale; the rest at nominal values.
 
 from __future__ import annotations
 
+import functools
 import time
 from dataclasses import dataclass, replace
 
@@ -154,6 +155,39 @@ def run_replicate(
     )
 
 
+@functools.cache
+def _process_base() -> Posterior:
+    return base_posterior()
+
+
+def replicate_unit(
+    index: int,
+    *,
+    seed: int,
+    n_walkers: int = 8,
+    warmup: int = 200,
+    chunk: int = 250,
+    max_steps: int = 4000,
+    exact_inputs: bool = False,
+) -> dict:
+    """Replicate ``index`` as a work unit of :func:`peano_bayes.fanout.run_units`: the base posterior is built
+    once per process (so every replicate a worker runs shares its compiled log posterior) and the result is a
+    JSON-ready row (``seed``, ``exact_inputs`` and :class:`Replicate`'s fields). The same arguments give the
+    same row in any process; ``names`` lists theta's entries in the order of ``truth`` and ``rank``."""
+    base = _process_base()
+    rep = run_replicate(
+        base,
+        index,
+        seed=seed,
+        n_walkers=n_walkers,
+        warmup=warmup,
+        chunk=chunk,
+        max_steps=max_steps,
+        exact_inputs=exact_inputs,
+    )
+    return {"seed": seed, "exact_inputs": exact_inputs, "names": list(base.names), **rep.as_dict()}
+
+
 def wilson_interval(k: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
     ci = stats.binomtest(k, n).proportion_ci(confidence_level=confidence, method="wilson")
     return float(ci.low), float(ci.high)
@@ -186,6 +220,7 @@ __all__ = [
     "Replicate",
     "base_posterior",
     "coverage_table",
+    "replicate_unit",
     "run_replicate",
     "simulate",
     "wilson_interval",

@@ -1,0 +1,366 @@
+"""One seam for every fan-out: materials in ``run``, datasets in ``fit-many``, SBC replicates, discovery-benchmark
+runs.
+
+A fan-out is a list of :class:`Unit` (a stable key, a top-level function and its arguments). :func:`run_units`
+sends each unit to an *executor*, anything with ``concurrent.futures``' ``submit(fn, *args) -> Future``, and
+returns one :class:`Outcome` per unit in the order given, whatever order they finished in. The callers hold no
+queue, claim file or worker process of their own, so the same units run
+
+- here, one after another (``executor=None``: no process, no pickling; the default of one job);
+- in local worker processes (:func:`make_executor` with ``jobs > 1``: spawned, since JAX must not be forked,
+  each with one XLA thread so workers do not oversubscribe the cores);
+- on a Dask cluster (``scheduler="local:N"`` starts a ``LocalCluster`` of N one-thread worker processes;
+  ``scheduler="tcp://HOST:8786"`` joins a running one; ``$PEANO_BAYES_SCHEDULER`` sets it for every command).
+
+**The units' contract.** A unit is idempotent and resumable: run twice it gives the same value, and a unit that
+stopped part way (a lost worker) continues from what it saved (a fit resumes from its sampler state, saved per
+chunk). Dask re-runs the unit of a lost worker on another one (``distributed.scheduler.allowed-failures``, 3 by
+default); a local process pool cannot survive a killed worker (``BrokenProcessPool``: the remaining units are
+reported failed, and a rerun resumes them). Results go to files the unit writes itself (a shared directory past
+one machine) or come back as the unit's return value.
+
+Each unit runs under :func:`_execute`: it switches on the parent's persistent compilation cache in the worker,
+keeps the unit's printed output in ``log_dir/<key>.log`` when a log folder is given, and records which worker ran
+it and for how long (:class:`Outcome`), the provenance :func:`provenance` collects. Importing this module does
+not import JAX or Dask.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import contextlib
+import io
+import multiprocessing
+import os
+import re
+import socket
+import sys
+import time
+import traceback
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .errors import PeanoBayesInputError
+
+#: Environment variable that names the scheduler when no ``--scheduler`` is given.
+SCHEDULER_ENV = "PEANO_BAYES_SCHEDULER"
+#: XLA flags of a worker process: one compute thread, so N workers use N cores.
+ONE_THREAD_XLA_FLAGS = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
+#: Environment of every worker process (local or Dask) that caps its thread pools at one thread.
+WORKER_ENV = {
+    "XLA_FLAGS": ONE_THREAD_XLA_FLAGS,
+    "OMP_NUM_THREADS": "1",
+    "OPENBLAS_NUM_THREADS": "1",
+    "MKL_NUM_THREADS": "1",
+}
+
+
+@dataclass(frozen=True)
+class Unit:
+    """One unit of work: ``fn(*args, **kwargs)``. ``key`` names it in logs, progress and outcomes (unique within
+    a fan-out; a file-name-safe form of it names its log file). ``fn`` must be importable by a worker (defined at
+    a module's top level) and its arguments picklable."""
+
+    key: str
+    fn: Callable
+    args: tuple = ()
+    kwargs: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What became of one :class:`Unit`: its ``value`` (``None`` if it failed), ``error`` (``None``, or the
+    exception's type and message), the worker that ran it (``host:pid``), and its ``seconds`` there (``nan`` when
+    the worker was lost before it reported)."""
+
+    key: str
+    value: object = None
+    error: str | None = None
+    traceback: str | None = None
+    worker: str | None = None
+    seconds: float = float("nan")
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None
+
+
+@dataclass(frozen=True)
+class _Context:
+    """What a worker needs from the parent: its compilation-cache folder and where unit logs go."""
+
+    cache_dir: str | None = None
+    log_dir: str | None = None
+
+
+class _Tee(io.TextIOBase):
+    """A text stream that writes to two others (the worker's own stream and the unit's log file)."""
+
+    def __init__(self, *streams):
+        self.streams = streams
+
+    def write(self, text):
+        for stream in self.streams:
+            stream.write(text)
+        return len(text)
+
+    def flush(self):
+        for stream in self.streams:
+            stream.flush()
+
+
+def log_name(key: str) -> str:
+    """The log file name of a unit: its key with anything but letters, digits, ``.``, ``_`` and ``-`` replaced."""
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", key) + ".log"
+
+
+def _execute(unit: Unit, context: _Context) -> Outcome:
+    """Run ``unit`` in this process (a worker, or the parent when serial) and report where and how long."""
+    if context.cache_dir:
+        from .jax_config import enable_compilation_cache
+
+        enable_compilation_cache(context.cache_dir)
+    worker = f"{socket.gethostname()}:{os.getpid()}"
+    start = time.perf_counter()
+    with contextlib.ExitStack() as stack:
+        if context.log_dir:
+            Path(context.log_dir).mkdir(parents=True, exist_ok=True)
+            log = stack.enter_context(open(Path(context.log_dir) / log_name(unit.key), "a", encoding="utf-8"))
+            stamp = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+            log.write(f"{stamp} {unit.key}: started on {worker}\n")  # a retried unit's log names every worker
+            log.flush()
+            stack.enter_context(contextlib.redirect_stdout(_Tee(sys.stdout, log)))
+            stack.enter_context(contextlib.redirect_stderr(_Tee(sys.stderr, log)))
+        value = unit.fn(*unit.args, **unit.kwargs)
+    return Outcome(unit.key, value, worker=worker, seconds=time.perf_counter() - start)
+
+
+def _current_cache_dir() -> str | None:
+    """The persistent compilation cache this process uses, if JAX is imported and one is set."""
+    jax = sys.modules.get("jax")
+    if jax is None:
+        return None
+    return jax.config.jax_compilation_cache_dir or None
+
+
+def _failed(key: str, err: BaseException) -> Outcome:
+    return Outcome(
+        key,
+        error=f"{type(err).__name__}: {err}",
+        traceback="".join(traceback.format_exception(err)),
+    )
+
+
+def run_units(
+    units: Sequence[Unit],
+    executor: cf.Executor | None = None,
+    *,
+    on_result: Callable[[Outcome], None] | None = None,
+    log: Callable[[str], None] | None = None,
+    progress: bool = False,
+    desc: str = "work units",
+    log_dir: str | os.PathLike | None = None,
+) -> list[Outcome]:
+    """Run ``units`` through ``executor`` (``None``: here, in order) and return their outcomes in the order of
+    ``units``.
+
+    A unit that raises does not stop the others: its outcome carries the error (and traceback), and the caller
+    decides. ``on_result(outcome)`` is called in this process as each unit finishes (in finishing order), so a
+    caller can append results to one file as they come (one writer, whatever the number of workers). ``log``
+    gets one line per finished unit: key, worker, time, counts done / failed / pending and the ETA; ``progress``
+    shows a bar. ``log_dir``: each unit's printed output is also kept in ``log_dir/<key>.log``.
+    """
+    keys = [u.key for u in units]
+    if len(set(keys)) != len(keys):
+        dup = sorted({k for k in keys if keys.count(k) > 1})
+        raise PeanoBayesInputError(f"work units need distinct keys; repeated: {', '.join(dup)}")
+    context = _Context(_current_cache_dir(), None if log_dir is None else str(log_dir))
+    outcomes: dict[str, Outcome] = {}
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(units), desc=desc, unit="unit")
+    start = time.perf_counter()
+
+    def finished(outcome: Outcome) -> None:
+        outcomes[outcome.key] = outcome
+        failed = sum(not o.ok for o in outcomes.values())
+        done = len(outcomes)
+        if bar is not None:
+            bar.update(1)
+            bar.set_postfix(failed=failed, refresh=False)
+        if log is not None:
+            elapsed = time.perf_counter() - start
+            eta = elapsed / done * (len(units) - done)
+            where = f" on {outcome.worker}" if outcome.worker else ""
+            status = f"done in {outcome.seconds:.0f} s{where}" if outcome.ok else f"FAILED ({outcome.error})"
+            log(
+                f"{outcome.key}: {status}; {done - failed} done, {failed} failed, {len(units) - done} pending"
+                + (f", about {eta / 60:.0f} min to go" if done < len(units) else "")
+            )
+        if on_result is not None:
+            on_result(outcome)
+
+    try:
+        if executor is None:
+            for unit in units:
+                try:
+                    outcome = _execute(unit, context)
+                except Exception as err:  # noqa: BLE001 - reported in the outcome, like a worker's failure
+                    outcome = _failed(unit.key, err)
+                finished(outcome)
+        else:
+            futures = {executor.submit(_execute, unit, context): unit for unit in units}
+            for future in cf.as_completed(futures):
+                try:
+                    outcome = future.result()
+                except Exception as err:  # noqa: BLE001 - the unit's error, or its worker's loss
+                    outcome = _failed(futures[future].key, err)
+                finished(outcome)
+    finally:
+        if bar is not None:
+            bar.close()
+    return [outcomes[k] for k in keys]
+
+
+def raise_failures(outcomes: Sequence[Outcome], what: str = "work unit") -> None:
+    """Raise one error naming every failed outcome (the first one's traceback in the message's tail)."""
+    failed = [o for o in outcomes if not o.ok]
+    if failed:
+        from .errors import PeanoBayesError
+
+        lines = "; ".join(f"{o.key}: {o.error}" for o in failed)
+        raise PeanoBayesError(f"{len(failed)} of {len(outcomes)} {what}(s) failed: {lines}")
+
+
+def _one_thread() -> None:
+    """Initializer of a local worker process: cap its thread pools before JAX starts its backend."""
+    for name, value in WORKER_ENV.items():
+        if name == "XLA_FLAGS" and os.environ.get(name):
+            value = f"{os.environ[name]} {value}"
+        os.environ[name] = value
+
+
+def parse_scheduler(spec: str | None) -> tuple[str, int | str | None]:
+    """``(kind, detail)`` of a scheduler specification: ``("processes", None)`` for none (local processes, or
+    serial with one job), ``("local", N)`` for ``local:N``, ``("address", URL)`` for ``tcp://HOST:PORT`` (any
+    ``scheme://``). Anything else is an input error naming the accepted forms."""
+    if spec is None or not spec.strip():
+        return "processes", None
+    spec = spec.strip()
+    m = re.fullmatch(r"local:(\d+)", spec)
+    if m:
+        n = int(m.group(1))
+        if n < 1:
+            raise PeanoBayesInputError(f"scheduler {spec!r}: a LocalCluster needs at least 1 worker")
+        return "local", n
+    if re.fullmatch(r"[a-z][a-z0-9+.-]*://\S+", spec):
+        return "address", spec
+    raise PeanoBayesInputError(
+        f"scheduler {spec!r} is not understood; expected 'local:N' (a Dask LocalCluster of N workers) or a Dask "
+        f"scheduler address such as 'tcp://HOST:8786' (from --scheduler or ${SCHEDULER_ENV})"
+    )
+
+
+def _dask():
+    try:
+        import distributed
+    except ImportError as err:
+        raise PeanoBayesInputError(
+            "a Dask scheduler was asked for, but dask.distributed is not installed; install it with "
+            "pip install 'peano-bayes[dask]' (or 'dask[distributed]')"
+        ) from err
+    return distributed
+
+
+@dataclass(frozen=True)
+class ExecutorInfo:
+    """How a fan-out ran: ``kind`` (``serial``, ``processes``, ``dask-local``, ``dask``), ``workers`` (``None``
+    when a remote cluster decides) and the scheduler ``address`` of a Dask cluster."""
+
+    kind: str
+    workers: int | None = None
+    address: str | None = None
+
+    def describe(self) -> str:
+        return {
+            "serial": "this process, one unit after another",
+            "processes": f"{self.workers} local worker processes",
+            "dask-local": f"a Dask LocalCluster of {self.workers} workers at {self.address}",
+            "dask": f"the Dask scheduler at {self.address}",
+        }[self.kind]
+
+
+@contextlib.contextmanager
+def make_executor(scheduler: str | None = None, jobs: int = 1) -> Iterator[tuple[cf.Executor | None, ExecutorInfo]]:
+    """``(executor, info)`` for :func:`run_units`, closed when the block ends.
+
+    ``scheduler`` (default ``$PEANO_BAYES_SCHEDULER``): none -> ``jobs`` local worker processes (``None``, i.e.
+    here and in order, for one job); ``local:N`` -> a Dask ``LocalCluster`` of N one-thread worker processes;
+    ``tcp://HOST:PORT`` -> the Dask cluster of that scheduler (its workers must have peano_bayes installed and see
+    the output folder).
+    """
+    if jobs < 1:
+        raise PeanoBayesInputError(f"jobs must be >= 1, got {jobs}")
+    kind, detail = parse_scheduler(scheduler if scheduler is not None else os.environ.get(SCHEDULER_ENV))
+    if kind == "processes":
+        if jobs == 1:
+            yield None, ExecutorInfo("serial", 1)
+            return
+        ctx = multiprocessing.get_context("spawn")
+        with cf.ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_one_thread) as pool:
+            yield pool, ExecutorInfo("processes", jobs)
+        return
+    distributed = _dask()
+    if kind == "local":
+        env = {k: (f"{os.environ['XLA_FLAGS']} {v}" if k == "XLA_FLAGS" and os.environ.get(k) else v)
+               for k, v in WORKER_ENV.items()}  # fmt: skip
+        with (
+            distributed.LocalCluster(
+                n_workers=detail,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=None,
+                env=env,
+            ) as cluster,
+            distributed.Client(cluster) as client,
+        ):
+            yield client.get_executor(pure=False), ExecutorInfo("dask-local", detail, cluster.scheduler_address)
+        return
+    with distributed.Client(detail) as client:
+        yield client.get_executor(pure=False), ExecutorInfo("dask", None, detail)
+
+
+def provenance(info: ExecutorInfo, outcomes: Sequence[Outcome], **extra) -> dict:
+    """A JSON-ready record of a fan-out: the executor, the package versions, ``extra`` (seeds, settings) and per
+    unit its worker, seconds and error."""
+    from importlib import metadata
+
+    versions = {}
+    for name in ("peano-bayes", "jax", "jaxlib", "numpy", "emcee", "optimistix", "arviz", "distributed"):
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = None
+    return {
+        "executor": {"kind": info.kind, "workers": info.workers, "address": info.address},
+        "python": sys.version.split()[0],
+        "packages": versions,
+        **extra,
+        "units": {o.key: {"worker": o.worker, "seconds": o.seconds, "error": o.error} for o in outcomes},
+    }
+
+
+__all__ = [
+    "SCHEDULER_ENV",
+    "ExecutorInfo",
+    "Outcome",
+    "Unit",
+    "make_executor",
+    "parse_scheduler",
+    "provenance",
+    "raise_failures",
+    "run_units",
+]

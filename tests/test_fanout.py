@@ -1,0 +1,176 @@
+"""The fan-out seam (peano_bayes.fanout): outcomes in order, errors kept, one writer, schedulers; and, on a Dask
+LocalCluster of two workers, three real units (a short fit, an SBC replicate, a discovery run) that survive the
+loss of a worker and equal a serial run with the same seeds."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from peano_bayes.errors import PeanoBayesError, PeanoBayesInputError
+from peano_bayes.fanout import Unit, log_name, make_executor, parse_scheduler, raise_failures, run_units
+
+
+def _square(x):
+    return x * x
+
+
+def _fails(x):
+    raise ValueError(f"no square for {x}")
+
+
+def _prints(x):
+    print(f"working on {x}")
+    return x
+
+
+def test_serial_units_come_back_in_order_with_errors_kept_and_one_writer(tmp_path):
+    units = [Unit("a", _square, (3,)), Unit("b", _fails, (4,)), Unit("c", _square, (5,))]
+    seen, lines = [], []
+    outcomes = run_units(units, None, on_result=lambda o: seen.append(o.key), log=lines.append)
+    assert [o.key for o in outcomes] == ["a", "b", "c"] == seen
+    assert [o.value for o in outcomes] == [9, None, 25]
+    assert [o.ok for o in outcomes] == [True, False, True]
+    assert outcomes[1].error == "ValueError: no square for 4" and "_fails" in outcomes[1].traceback
+    assert outcomes[0].worker == f"{os.uname().nodename}:{os.getpid()}" and outcomes[0].seconds >= 0
+    assert lines[-1].startswith("c: done in") and "2 done, 1 failed, 0 pending" in lines[-1]
+    with pytest.raises(PeanoBayesError, match=r"1 of 3 work unit\(s\) failed: b: ValueError: no square for 4"):
+        raise_failures(outcomes)
+    with pytest.raises(PeanoBayesInputError, match="distinct keys; repeated: a"):
+        run_units([Unit("a", _square, (1,)), Unit("a", _square, (2,))])
+
+
+def test_a_units_printed_output_is_kept_in_its_log_file(tmp_path, capsys):
+    run_units([Unit("TP / spec 1", _prints, (7,))], None, log_dir=tmp_path)
+    text = (tmp_path / log_name("TP / spec 1")).read_text()
+    assert log_name("TP / spec 1") == "TP_spec_1.log"
+    assert "TP / spec 1: started on " in text and "working on 7" in text
+    assert "working on 7" in capsys.readouterr().out  # still printed where it was
+
+
+def test_scheduler_specifications():
+    assert parse_scheduler(None) == ("processes", None) == parse_scheduler("  ")
+    assert parse_scheduler("local:3") == ("local", 3)
+    assert parse_scheduler("tcp://10.0.0.2:8786") == ("address", "tcp://10.0.0.2:8786")
+    for bad in ("local:0", "local", "10.0.0.2:8786", "dask"):
+        with pytest.raises(PeanoBayesInputError, match="local:N|at least 1 worker"):
+            parse_scheduler(bad)
+    with pytest.raises(PeanoBayesInputError, match="jobs must be >= 1"):
+        with make_executor(None, 0):
+            pass
+    with make_executor(None, 1) as (executor, info):
+        assert executor is None and info.kind == "serial"
+
+
+def test_the_command_line_refuses_a_bad_scheduler_before_anything_runs(tmp_path):
+    env = {**os.environ, "PEANO_BAYES_SCHEDULER": "somewhere"}
+    out = tmp_path / "r"
+    done = subprocess.run(
+        [sys.executable, "-m", "peano_bayes", "run", "--out", str(out)], capture_output=True, text=True, env=env
+    )
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert "scheduler 'somewhere' is not understood" in done.stderr and "$PEANO_BAYES_SCHEDULER" in done.stderr
+    assert not out.exists()
+
+
+# --- three real units on a Dask LocalCluster, one worker killed mid-unit ---------------------------------------
+
+FIT = dict(tests=("load_cycle",), n_starts=1, n_walkers=18, n_ensembles=2, chunk=40, max_steps=120, warmup=80, seed=4)
+
+
+def _data(tmp_path):
+    from peano_bayes.data import save
+    from peano_bayes.rig import simulate_dataset
+
+    data = tmp_path / "TP.csv"
+    if not data.exists():
+        save(simulate_dataset("TP", None, seed=5, specimens=1, repeats=1, tests=("load_cycle",)), data)
+    return data
+
+
+def _other_units():
+    from peano_bayes.validation.discovery_benchmark import Case, run_case
+    from peano_bayes.validation.sbc import replicate_unit
+
+    return [
+        Unit("sbc", replicate_unit, (3,), dict(seed=20261126, n_walkers=8, warmup=40, chunk=40, max_steps=80)),
+        Unit("discovery", run_case, (Case(force_sd_n=0.2), 120, {}, ("load_cycle",))),
+    ]
+
+
+def _numbers(outcomes, out):
+    """What must not depend on where a unit ran: the fit's posterior draws, the replicate's truth and ranks, the
+    discovery row (less its time)."""
+    import arviz as az
+
+    draws = az.from_netcdf(out / "TP" / "posterior.nc").posterior
+    rows = [{k: v for k, v in o.value.items() if k != "seconds"} for o in outcomes]
+    return {name: np.asarray(draws[name]) for name in draws.data_vars}, rows
+
+
+@pytest.mark.slow
+@pytest.mark.xdist_group("dask")
+def test_units_on_a_dask_cluster_survive_a_killed_worker_and_equal_a_serial_run(tmp_path):
+    """fit-many sends a short fit to a two-worker LocalCluster while an SBC replicate and a discovery run go to
+    the same cluster through the seam. The worker running the fit is killed after its first saved chunk: Dask
+    re-runs the unit on another worker, which resumes from that chunk. Everything completes, and every number
+    equals a serial run in this process with the same seeds."""
+    pytest.importorskip("distributed")
+    from peano_bayes.inference.sample import load_state
+    from peano_bayes.pipeline import fit_many
+
+    data = _data(tmp_path)
+    cluster_out, serial_out = tmp_path / "cluster", tmp_path / "serial"
+    state = cluster_out / "TP" / "sampler_state.npz"
+    found: dict = {}
+
+    with make_executor("local:2") as (executor, info):
+        assert info.kind == "dask-local" and info.workers == 2
+        quiet = dict(progress=False, figures=False, log=lambda m: None)
+        threads = [
+            threading.Thread(
+                target=lambda: found.update(fit=fit_many([data], cluster_out, scheduler=info.address, **FIT, **quiet))
+            ),
+            threading.Thread(target=lambda: found.update(others=run_units(_other_units(), executor))),
+        ]
+        for thread in threads:
+            thread.start()
+        deadline = time.time() + 600
+        while not state.exists() and threads[0].is_alive() and time.time() < deadline:
+            time.sleep(0.2)
+        assert state.exists(), "the fit never saved a chunk"
+        unit_log = cluster_out / "logs" / "TP.log"
+        pid = int(unit_log.read_text().splitlines()[0].rsplit(":", 1)[1])
+        saved = load_state(state)[0].shape[0]  # steps the killed worker had saved (at least)
+        os.kill(pid, signal.SIGKILL)  # the worker running the fit, mid-unit: its nanny starts a new one
+        for thread in threads:
+            thread.join(timeout=900)
+        assert not any(thread.is_alive() for thread in threads)
+    assert [s["label"] for s in found["fit"]] == ["TP"]
+    assert [o.key for o in found["others"]] == ["sbc", "discovery"]
+    assert all(o.ok for o in found["others"]), [o.error for o in found["others"]]
+    started = [line for line in unit_log.read_text().splitlines() if ": started on " in line]
+    assert len(started) == 2 and started[0] != started[1]  # run twice, on two worker processes
+    summary = json.loads((cluster_out / "TP" / "summary.json").read_text())
+    assert 0 < saved <= summary["resumed_from_step"] < 120 == summary["steps"]  # continued from its last chunk
+    provenance = json.loads((cluster_out / "provenance.json").read_text())
+    assert provenance["executor"]["kind"] == "dask" and provenance["executor"]["address"] == info.address
+    assert provenance["units"]["TP"]["worker"] == started[1].rsplit(" ", 1)[1]  # the worker that finished it
+    assert provenance["seed"] == 4 and provenance["packages"]["distributed"]
+
+    fit_many([data], serial_out, jobs=1, **FIT, **quiet)
+    serial = run_units(_other_units(), None)
+    (cluster_draws, cluster_rows), (serial_draws, serial_rows) = (
+        _numbers(found["others"], cluster_out),
+        _numbers(serial, serial_out),
+    )
+    assert cluster_rows == serial_rows
+    assert cluster_draws.keys() == serial_draws.keys()
+    for name in serial_draws:
+        np.testing.assert_allclose(cluster_draws[name], serial_draws[name], rtol=1e-9, atol=0, err_msg=name)
