@@ -235,8 +235,9 @@ def raise_failures(outcomes: Sequence[Outcome], what: str = "work unit") -> None
         raise PeanoBayesError(f"{len(failed)} of {len(outcomes)} {what}(s) failed: {lines}")
 
 
-def _one_thread() -> None:
-    """Initializer of a local worker process: cap its thread pools before JAX starts its backend."""
+def cap_threads() -> None:
+    """Cap this process's thread pools at one thread (:data:`WORKER_ENV`); call it before JAX starts its backend
+    (the initializer of a local worker process)."""
     for name, value in WORKER_ENV.items():
         if name == "XLA_FLAGS" and os.environ.get(name):
             value = f"{os.environ[name]} {value}"
@@ -310,7 +311,7 @@ def make_executor(scheduler: str | None = None, jobs: int = 1) -> Iterator[tuple
             yield None, ExecutorInfo("serial", 1)
             return
         ctx = multiprocessing.get_context("spawn")
-        with cf.ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_one_thread) as pool:
+        with cf.ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=cap_threads) as pool:
             yield pool, ExecutorInfo("processes", jobs)
         return
     distributed = _dask()
@@ -357,6 +358,8 @@ __all__ = [
     "SCHEDULER_ENV",
     "ExecutorInfo",
     "Outcome",
+    "WORKER_ENV",
+    "cap_threads",
     "Unit",
     "make_executor",
     "parse_scheduler",
