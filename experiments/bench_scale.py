@@ -2,6 +2,7 @@
 Dask LocalCluster, and the per-unit overhead of each executor.
 
     python experiments/bench_scale.py [--replicates 8] [--steps 300] [--walkers 8] [--noop 200]
+                                      [--repeat-pools N]
 
 Each configuration runs the same ``--replicates`` SBC replicates (``peano_bayes.validation.sbc.replicate_unit``,
 root seed 20261126, ``--walkers`` walkers, warm-up and chunk of ``--steps`` / 3, at most ``--steps`` steps)
@@ -15,7 +16,9 @@ worker process (not counted). Configurations, side by side in one run:
   reference for "no slower than before");
 - ``dask-local-2``: a Dask LocalCluster of two one-thread workers (``--scheduler local:2``).
 
-The per-unit overhead is measured apart with ``--noop`` units that return at once: seconds per unit through
+``--repeat-pools N`` then runs ``processes-2`` and ``processes-2-uncapped`` N more times each, alternating, to
+tell the thread cap's effect from run-to-run noise (reported as the rates of every repeat). The per-unit
+overhead is measured apart with ``--noop`` units that return at once: seconds per unit through
 each executor, after its workers are up. Scaling efficiency = rate / (workers x the rate of ``processes-1``). The
 machine should be otherwise idle. The last line printed is one JSON object.
 """
@@ -67,6 +70,7 @@ def main(argv=None) -> int:
     parser.add_argument("--steps", type=int, default=300)
     parser.add_argument("--walkers", type=int, default=8)
     parser.add_argument("--noop", type=int, default=200)
+    parser.add_argument("--repeat-pools", type=int, default=0, help="extra alternating runs of the two pools")
     args = parser.parse_args(argv)
     enable_compilation_cache()
     with make_executor(None, 2) as (executor, _):  # warm the persistent compilation cache in a worker
@@ -103,6 +107,14 @@ def main(argv=None) -> int:
         seconds, outcomes = _timed(executor, units)
         record("dask-local-2", seconds, outcomes, 2, _overhead(executor, args.noop))
 
+    repeats = {"processes-2": [results["processes-2"]["replicates_per_hour"]], "processes-2-uncapped": []}
+    repeats["processes-2-uncapped"].append(results["processes-2-uncapped"]["replicates_per_hour"])
+    for i in range(args.repeat_pools):
+        for name, initializer in (("processes-2-uncapped", None), ("processes-2", cap_threads)):
+            with cf.ProcessPoolExecutor(max_workers=2, mp_context=spawn, initializer=initializer) as executor:
+                seconds, _ = _timed(executor, units)
+            repeats[name].append(round(len(units) / seconds * 3600, 1))
+            print(f"{name}, repeat {i + 1}: {repeats[name][-1]:.0f}/h", flush=True)
     one = results["processes-1"]["replicates_per_hour"]
     for r in results.values():
         r["scaling_efficiency"] = round(r["replicates_per_hour"] / (r["workers"] * one), 3)
@@ -113,6 +125,12 @@ def main(argv=None) -> int:
         "configurations": results,
         "capped_over_uncapped_rate": round(
             results["processes-2"]["replicates_per_hour"] / results["processes-2-uncapped"]["replicates_per_hour"], 3
+        ),
+        "pool_rates_per_hour": repeats,
+        "capped_over_uncapped_mean_rate": round(
+            sum(repeats["processes-2"]) / len(repeats["processes-2"])
+            / (sum(repeats["processes-2-uncapped"]) / len(repeats["processes-2-uncapped"])),
+            3,
         ),
         "dask_over_processes_rate": round(
             results["dask-local-2"]["replicates_per_hour"] / results["processes-2"]["replicates_per_hour"], 3
