@@ -128,7 +128,8 @@ def run(out: Path, snrs, noise_levels, seeds: int, first_seed: int, jobs: int, o
 
         with make_executor(scheduler, jobs) as (executor, info):
             print(f"runs on {info.describe()}", flush=True)
-            run_units(units, executor, on_result=finished, log=print)
+            logs = None if executor is None else out / "logs"  # each run's output, kept per worker unit
+            run_units(units, executor, on_result=finished, log=print, log_dir=logs)
     return list(_read_rows(out).values())
 
 

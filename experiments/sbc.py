@@ -140,7 +140,10 @@ def main(argv=None) -> int:
     try:
         with make_executor(args.scheduler, args.jobs) as (executor, info):
             print(f"{len(todo)} replicates on {info.describe()}", flush=True)
-            outcomes = run_units(units, executor, on_result=finished, progress=True, desc="SBC replicates")
+            logs = None if executor is None else args.out / "logs"  # each replicate's output, kept per worker unit
+            outcomes = run_units(
+                units, executor, on_result=finished, progress=True, desc="SBC replicates", log_dir=logs
+            )
     except PeanoBayesInputError as err:
         print(f"sbc.py: error: {err}", file=sys.stderr)
         return 2

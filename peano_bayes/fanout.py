@@ -7,8 +7,10 @@ returns one :class:`Outcome` per unit in the order given, whatever order they fi
 queue, claim file or worker process of their own, so the same units run
 
 - here, one after another (``executor=None``: no process, no pickling; the default of one job);
-- in local worker processes (:func:`make_executor` with ``jobs > 1``: spawned, since JAX must not be forked,
-  each with one XLA thread so workers do not oversubscribe the cores);
+- in local worker processes (:func:`make_executor` with ``jobs > 1``: spawned, since JAX must not be forked;
+  their thread pools are left as they are: on two cores, two workers ran SBC replicates 5 % faster than with one
+  XLA thread each, because each worker's serial Python phases leave a core the other can use,
+  ``experiments/bench_scale.py``);
 - on a Dask cluster (``scheduler="local:N"`` starts a ``LocalCluster`` of N one-thread worker processes;
   ``scheduler="tcp://HOST:8786"`` joins a running one; ``$PEANO_BAYES_SCHEDULER`` sets it for every command).
 
@@ -43,11 +45,14 @@ from pathlib import Path
 
 from .errors import PeanoBayesInputError
 
+#: Seconds between refreshes of the progress bar's running count while no unit finishes.
+POLL_S = 10.0
 #: Environment variable that names the scheduler when no ``--scheduler`` is given.
 SCHEDULER_ENV = "PEANO_BAYES_SCHEDULER"
-#: XLA flags of a worker process: one compute thread, so N workers use N cores.
+#: XLA flags of a Dask worker process: one compute thread, so a node's N workers use N cores.
 ONE_THREAD_XLA_FLAGS = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
-#: Environment of every worker process (local or Dask) that caps its thread pools at one thread.
+#: Environment of a Dask worker process (started by ``local:N``), capping its thread pools at one thread; local
+#: process pools are not capped (see the module docstring), :func:`cap_threads` applies it to any process.
 WORKER_ENV = {
     "XLA_FLAGS": ONE_THREAD_XLA_FLAGS,
     "OMP_NUM_THREADS": "1",
@@ -168,8 +173,10 @@ def run_units(
     A unit that raises does not stop the others: its outcome carries the error (and traceback), and the caller
     decides. ``on_result(outcome)`` is called in this process as each unit finishes (in finishing order), so a
     caller can append results to one file as they come (one writer, whatever the number of workers). ``log``
-    gets one line per finished unit: key, worker, time, counts done / failed / pending and the ETA; ``progress``
-    shows a bar. ``log_dir``: each unit's printed output is also kept in ``log_dir/<key>.log``.
+    gets one line per finished unit: key, worker, time, the counts done / running / failed / not finished and the
+    time left; ``progress`` shows a bar with the same counts. ``log_dir``: each unit's printed output is also kept
+    in ``log_dir/<key>.log``, which a worker creates when it starts the unit, so the running count (units started
+    and not finished) is known only with a ``log_dir`` that this process can read.
     """
     keys = [u.key for u in units]
     if len(set(keys)) != len(keys):
@@ -184,22 +191,31 @@ def run_units(
         bar = tqdm(total=len(units), desc=desc, unit="unit")
     start = time.perf_counter()
 
+    def running() -> int | None:
+        """Units started (their log file exists: a worker opened it) and not finished; ``None`` without logs."""
+        if log_dir is None:
+            return None
+        return sum(1 for k in keys if k not in outcomes and (Path(log_dir) / log_name(k)).exists())
+
+    def counts() -> str:
+        failed = sum(not o.ok for o in outcomes.values())
+        now = running()
+        busy = "" if now is None else f", {now} running"
+        return f"{len(outcomes) - failed} done{busy}, {failed} failed, {len(units) - len(outcomes)} not finished"
+
     def finished(outcome: Outcome) -> None:
         outcomes[outcome.key] = outcome
-        failed = sum(not o.ok for o in outcomes.values())
         done = len(outcomes)
         if bar is not None:
             bar.update(1)
-            bar.set_postfix(failed=failed, refresh=False)
+            bar.set_postfix_str(counts(), refresh=False)
         if log is not None:
             elapsed = time.perf_counter() - start
             eta = elapsed / done * (len(units) - done)
             where = f" on {outcome.worker}" if outcome.worker else ""
             status = f"done in {outcome.seconds:.0f} s{where}" if outcome.ok else f"FAILED ({outcome.error})"
-            log(
-                f"{outcome.key}: {status}; {done - failed} done, {failed} failed, {len(units) - done} pending"
-                + (f", about {eta / 60:.0f} min to go" if done < len(units) else "")
-            )
+            left = f", about {eta / 60:.0f} min to go" if done < len(units) else ""
+            log(f"{outcome.key}: {status}; {counts()}{left}")
         if on_result is not None:
             on_result(outcome)
 
@@ -213,12 +229,17 @@ def run_units(
                 finished(outcome)
         else:
             futures = {executor.submit(_execute, unit, context): unit for unit in units}
-            for future in cf.as_completed(futures):
-                try:
-                    outcome = future.result()
-                except Exception as err:  # noqa: BLE001 - the unit's error, or its worker's loss
-                    outcome = _failed(futures[future].key, err)
-                finished(outcome)
+            pending = set(futures)
+            while pending:  # woken by each finished unit, and every POLL_S to refresh the running count
+                done, pending = cf.wait(pending, timeout=POLL_S, return_when=cf.FIRST_COMPLETED)
+                for future in done:
+                    try:
+                        outcome = future.result()
+                    except Exception as err:  # noqa: BLE001 - the unit's error, or its worker's loss
+                        outcome = _failed(futures[future].key, err)
+                    finished(outcome)
+                if bar is not None and not done:
+                    bar.set_postfix_str(counts())
     finally:
         if bar is not None:
             bar.close()
@@ -298,8 +319,9 @@ class ExecutorInfo:
 def make_executor(scheduler: str | None = None, jobs: int = 1) -> Iterator[tuple[cf.Executor | None, ExecutorInfo]]:
     """``(executor, info)`` for :func:`run_units`, closed when the block ends.
 
-    ``scheduler`` (default ``$PEANO_BAYES_SCHEDULER``): none -> ``jobs`` local worker processes (``None``, i.e.
-    here and in order, for one job); ``local:N`` -> a Dask ``LocalCluster`` of N one-thread worker processes;
+    ``scheduler`` (default ``$PEANO_BAYES_SCHEDULER``): none -> ``jobs`` spawned local worker processes
+    (``None``, i.e. here and in order, for one job); ``local:N`` -> a Dask ``LocalCluster`` of N one-thread worker
+    processes;
     ``tcp://HOST:PORT`` -> the Dask cluster of that scheduler (its workers must have peano_bayes installed and see
     the output folder).
     """
@@ -311,7 +333,7 @@ def make_executor(scheduler: str | None = None, jobs: int = 1) -> Iterator[tuple
             yield None, ExecutorInfo("serial", 1)
             return
         ctx = multiprocessing.get_context("spawn")
-        with cf.ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=cap_threads) as pool:
+        with cf.ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
             yield pool, ExecutorInfo("processes", jobs)
         return
     distributed = _dask()

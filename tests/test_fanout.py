@@ -39,7 +39,7 @@ def test_serial_units_come_back_in_order_with_errors_kept_and_one_writer(tmp_pat
     assert [o.ok for o in outcomes] == [True, False, True]
     assert outcomes[1].error == "ValueError: no square for 4" and "_fails" in outcomes[1].traceback
     assert outcomes[0].worker == f"{os.uname().nodename}:{os.getpid()}" and outcomes[0].seconds >= 0
-    assert lines[-1].startswith("c: done in") and "2 done, 1 failed, 0 pending" in lines[-1]
+    assert lines[-1].startswith("c: done in") and "2 done, 1 failed, 0 not finished" in lines[-1]
     with pytest.raises(PeanoBayesError, match=r"1 of 3 work unit\(s\) failed: b: ValueError: no square for 4"):
         raise_failures(outcomes)
     with pytest.raises(PeanoBayesInputError, match="distinct keys; repeated: a"):
@@ -47,7 +47,9 @@ def test_serial_units_come_back_in_order_with_errors_kept_and_one_writer(tmp_pat
 
 
 def test_a_units_printed_output_is_kept_in_its_log_file(tmp_path, capsys):
-    run_units([Unit("TP / spec 1", _prints, (7,))], None, log_dir=tmp_path)
+    lines = []
+    run_units([Unit("TP / spec 1", _prints, (7,)), Unit("b", _prints, (8,))], None, log_dir=tmp_path, log=lines.append)
+    assert "1 done, 0 running, 0 failed, 1 not finished" in lines[0]  # b's log does not exist yet: not started
     text = (tmp_path / log_name("TP / spec 1")).read_text()
     assert log_name("TP / spec 1") == "TP_spec_1.log"
     assert "TP / spec 1: started on " in text and "working on 7" in text
