@@ -247,7 +247,7 @@ def run_units(
 
 
 def raise_failures(outcomes: Sequence[Outcome], what: str = "work unit") -> None:
-    """Raise one error naming every failed outcome (the first one's traceback in the message's tail)."""
+    """Raise one error naming every failed outcome and its error (the tracebacks stay in the outcomes)."""
     failed = [o for o in outcomes if not o.ok]
     if failed:
         from .errors import PeanoBayesError
@@ -256,13 +256,18 @@ def raise_failures(outcomes: Sequence[Outcome], what: str = "work unit") -> None
         raise PeanoBayesError(f"{len(failed)} of {len(outcomes)} {what}(s) failed: {lines}")
 
 
+def _one_thread_env() -> dict[str, str]:
+    """:data:`WORKER_ENV`, with the XLA flags appended to any this process already has."""
+    env = dict(WORKER_ENV)
+    if os.environ.get("XLA_FLAGS"):
+        env["XLA_FLAGS"] = f"{os.environ['XLA_FLAGS']} {ONE_THREAD_XLA_FLAGS}"
+    return env
+
+
 def cap_threads() -> None:
     """Cap this process's thread pools at one thread (:data:`WORKER_ENV`); call it before JAX starts its backend
-    (the initializer of a local worker process)."""
-    for name, value in WORKER_ENV.items():
-        if name == "XLA_FLAGS" and os.environ.get(name):
-            value = f"{os.environ[name]} {value}"
-        os.environ[name] = value
+    (e.g. as a process pool's initializer)."""
+    os.environ.update(_one_thread_env())
 
 
 def parse_scheduler(spec: str | None) -> tuple[str, int | str | None]:
@@ -319,11 +324,11 @@ class ExecutorInfo:
 def make_executor(scheduler: str | None = None, jobs: int = 1) -> Iterator[tuple[cf.Executor | None, ExecutorInfo]]:
     """``(executor, info)`` for :func:`run_units`, closed when the block ends.
 
-    ``scheduler`` (default ``$PEANO_BAYES_SCHEDULER``): none -> ``jobs`` spawned local worker processes
-    (``None``, i.e. here and in order, for one job); ``local:N`` -> a Dask ``LocalCluster`` of N one-thread worker
-    processes;
-    ``tcp://HOST:PORT`` -> the Dask cluster of that scheduler (its workers must have peano_bayes installed and see
-    the output folder).
+    ``scheduler`` (default ``$PEANO_BAYES_SCHEDULER``):
+    - none: ``jobs`` spawned local worker processes (``None``, i.e. here and in order, for one job);
+    - ``local:N``: a Dask ``LocalCluster`` of N one-thread worker processes;
+    - ``tcp://HOST:PORT``: the Dask cluster of that scheduler (its workers must have peano_bayes installed and
+      see the output folder).
     """
     if jobs < 1:
         raise PeanoBayesInputError(f"jobs must be >= 1, got {jobs}")
@@ -338,15 +343,13 @@ def make_executor(scheduler: str | None = None, jobs: int = 1) -> Iterator[tuple
         return
     distributed = _dask()
     if kind == "local":
-        env = {k: (f"{os.environ['XLA_FLAGS']} {v}" if k == "XLA_FLAGS" and os.environ.get(k) else v)
-               for k, v in WORKER_ENV.items()}  # fmt: skip
         with (
             distributed.LocalCluster(
                 n_workers=detail,
                 threads_per_worker=1,
                 processes=True,
                 dashboard_address=None,
-                env=env,
+                env=_one_thread_env(),
             ) as cluster,
             distributed.Client(cluster) as client,
         ):

@@ -160,31 +160,15 @@ def _process_base() -> Posterior:
     return base_posterior()
 
 
-def replicate_unit(
-    index: int,
-    *,
-    seed: int,
-    n_walkers: int = 8,
-    warmup: int = 200,
-    chunk: int = 250,
-    max_steps: int = 4000,
-    exact_inputs: bool = False,
-) -> dict:
-    """Replicate ``index`` as a work unit of :func:`peano_bayes.fanout.run_units`: the base posterior is built
-    once per process (so every replicate a worker runs shares its compiled log posterior) and the result is a
-    JSON-ready row (``seed``, ``exact_inputs`` and :class:`Replicate`'s fields). The same arguments give the
-    same row in any process; ``names`` lists theta's entries in the order of ``truth`` and ``rank``."""
+def replicate_unit(index: int, *, seed: int, **settings) -> dict:
+    """Replicate ``index`` as a work unit of :func:`peano_bayes.fanout.run_units`: :func:`run_replicate` with
+    ``settings`` (its keyword arguments) on the base posterior, built once per process (so every replicate a
+    worker runs shares its compiled log posterior). The result is a JSON-ready row: ``seed``, ``exact_inputs``,
+    ``names`` (theta's entries, the order of ``truth`` and ``rank``) and :class:`Replicate`'s fields. The same
+    arguments give the same row in any process."""
     base = _process_base()
-    rep = run_replicate(
-        base,
-        index,
-        seed=seed,
-        n_walkers=n_walkers,
-        warmup=warmup,
-        chunk=chunk,
-        max_steps=max_steps,
-        exact_inputs=exact_inputs,
-    )
+    rep = run_replicate(base, index, seed=seed, **settings)
+    exact_inputs = settings.get("exact_inputs", False)
     return {"seed": seed, "exact_inputs": exact_inputs, "names": list(base.names), **rep.as_dict()}
 
 
