@@ -95,16 +95,16 @@ def _prior_spread(prior: Prior, seed: int) -> jnp.ndarray:
 
 
 def _residuals_and_solver_ok(observations: Observations, prior: Prior, config: ModelConfig, noise, spread, fixed):
-    """``evaluate(u, groups) -> (residuals (n,), solver_ok)``: the weighted residuals of the run ``groups``
-    (those of ``observations`` or others of the same shapes) and whether every simulation met its solver
-    tolerance (:data:`SOLVER_TOLERANCE`), from one simulation. The groups are an argument, not a constant of
+    """``evaluate(u, groups) -> (residuals (n,), solver_ok, predictions)``: the weighted residuals of the run
+    ``groups`` (those of ``observations`` or others of the same shapes), whether every simulation met its
+    solver tolerance (:data:`SOLVER_TOLERANCE`) and each group's prediction (r, m), from one simulation. The groups are an argument, not a constant of
     the compiled program, so materials whose data shapes and prior agree share one program through the
     persistent compilation cache."""
     centre = prior.median_unconstrained()
 
     def evaluate(u, groups):
         params = {**fixed, **prior.from_unconstrained(u)}
-        parts, ok = [], jnp.asarray(True)
+        parts, ok, predictions = [], jnp.asarray(True), []
         for group in groups:
             predicted, errors = predict(params, group, config=config, geometry=observations.geometry)
             scale = bin_noise_sd(noise[OBSERVED[group.test][1]], group)
@@ -112,8 +112,9 @@ def _residuals_and_solver_ok(observations: Observations, prior: Prior, config: M
             measured = jnp.isfinite(observed)
             parts.append(jnp.where(measured, (jnp.where(measured, observed, 0.0) - predicted) / scale, 0.0).ravel())
             ok = ok & jnp.all(errors <= SOLVER_TOLERANCE[group.test])
+            predictions.append(predicted)
         parts.append((u - centre) / spread)
-        return jnp.concatenate(parts), ok
+        return jnp.concatenate(parts), ok, predictions
 
     return evaluate
 
@@ -202,24 +203,29 @@ def fit(
 
     def one(u0, groups):
         sol = optx.least_squares(fn, solver, u0, groups, max_steps=max_steps, throw=False)
-        r, solver_ok = evaluate(sol.value, groups)
+        r, solver_ok, predictions = evaluate(sol.value, groups)
         cost = 0.5 * jnp.sum(r**2)
         # A point where the physics solver misses its tolerance has likelihood zero (see likelihood.py).
         ok = jnp.isfinite(cost) & solver_ok
-        return sol.value, ok, sol.result == optx.RESULTS.successful, jnp.where(ok, cost, jnp.inf)
+        # The end point's Jacobian and predictions come out of the same program: tracing the physics again
+        # in programs of their own costs seconds, evaluating them for every start costs little.
+        jac = jax.jacfwd(fn)(sol.value, groups)
+        return sol.value, ok, sol.result == optx.RESULTS.successful, jnp.where(ok, cost, jnp.inf), jac, predictions
 
     starts = np.vstack([np.asarray(prior.median_unconstrained())[None], prior.sample(seed, n_starts - 1)])
     groups = observations.groups
-    values, ok, converged, costs = jax.jit(jax.vmap(one, in_axes=(0, None)))(jnp.asarray(starts), groups)
+    values, ok, converged, costs, jacs, predictions = jax.jit(jax.vmap(one, in_axes=(0, None)))(
+        jnp.asarray(starts), groups
+    )
     costs = np.asarray(costs)
     best = int(np.argmin(costs))
     if not np.isfinite(costs[best]):
         raise RuntimeError(f"all {n_starts} least-squares starts failed (non-finite, or the physics solver missed)")
     u = np.asarray(values[best])
-    jac = np.asarray(jax.jit(jax.jacfwd(fn))(jnp.asarray(u), groups))  # one program, not op by op
+    jac = np.asarray(jacs[best])
     covariance = np.linalg.pinv(jac.T @ jac)
     params = {k: float(v) for k, v in {**fixed, **prior.from_unconstrained(u)}.items()}
-    predicted = _predicted(params, observations, config)
+    predicted = [np.asarray(p[best]) for p in predictions]
     return FitResult(
         names=prior.names,
         u=u,

@@ -592,6 +592,13 @@ def _predict_sets(params, group: RunGroup, strain, pressure_pa, config: ModelCon
     return predicted.reshape(u, m, group.points_per_bin).mean(axis=-1), error
 
 
+#: :func:`_predict_sets` behind one stable ``jax.jit``: every program that contains a prediction (least
+#: squares, its Jacobian, the mode search, the batched log posterior, the pointwise values and predictive
+#: draws) reuses its traced program for given shapes, configuration and geometry, and differentiates or
+#: vectorizes that program instead of running the physics' Python again (tracing it costs seconds).
+_traced_predict_sets = jax.jit(_predict_sets, static_argnums=(4, 5))
+
+
 def predict(params, group: RunGroup, *, config: ModelConfig = DEFAULT_CONFIG, geometry: Geometry = PAPER_GEOMETRY):
     """Predicted observed signal (r, m) of every run in ``group`` and each run's solver error (r,).
 
@@ -602,7 +609,7 @@ def predict(params, group: RunGroup, *, config: ModelConfig = DEFAULT_CONFIG, ge
     ``exp(offset[name][s])`` (the hierarchical model of :class:`~peano_bayes.inference.posterior.Posterior`).
     """
     strain, pressure = jnp.asarray(group.strain), jnp.asarray(group.pressure_pa)
-    predicted, error = _predict_sets(params, group, strain, pressure, config, geometry)
+    predicted, error = _traced_predict_sets(params, group, strain, pressure, config, geometry)
     shared = jnp.asarray(group.shared)
     return predicted[shared], error[shared]
 
@@ -616,7 +623,7 @@ def input_error_jacobian(
     :attr:`RunGroup.pressure_error`), by forward-mode differentiation of the simulation. Compiled once per
     protocol (shapes) and configuration; inside a traced function it is inlined."""
     strain, pressure = jnp.asarray(group.strain), jnp.asarray(group.pressure_pa)
-    fn = lambda s, p: _predict_sets(params, group, s, p, config, geometry)  # noqa: E731
+    fn = lambda s, p: _traced_predict_sets(params, group, s, p, config, geometry)  # noqa: E731
 
     def along(ds, dp):
         (predicted, error), (tangent, _) = jax.jvp(fn, (strain, pressure), (ds, dp))

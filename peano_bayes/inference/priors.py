@@ -108,6 +108,33 @@ _CONFIG_FIELDS = tuple(f.name for f in dataclasses.fields(ModelConfig))
 _LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
 
 
+class _NumpyOps:
+    """The few array functions the transforms use, in NumPy: values that are not JAX arrays (prior draws,
+    stored posterior draws) are transformed without dispatching, and compiling, one XLA program per operation
+    and shape."""
+
+    log, exp, where, zeros_like, stack = np.log, np.exp, np.where, np.zeros_like, np.stack
+    sigmoid = staticmethod(special.expit)
+
+    @staticmethod
+    def log_sigmoid(u):
+        return -np.logaddexp(0.0, -u)
+
+
+class _JaxOps:
+    log, exp, where, zeros_like, stack = jnp.log, jnp.exp, jnp.where, jnp.zeros_like, jnp.stack
+    sigmoid, log_sigmoid = staticmethod(jax.nn.sigmoid), staticmethod(jax.nn.log_sigmoid)
+
+
+def _ops(*values):
+    """JAX's functions where any value is a JAX array or tracer, else NumPy's (float64 either way)."""
+    return _JaxOps if any(isinstance(v, jax.Array) for v in values) else _NumpyOps
+
+
+def _as_array(x, ops):
+    return jnp.asarray(x, dtype=jnp.float64) if ops is _JaxOps else np.asarray(x, dtype=np.float64)
+
+
 # ----------------------------------------------------------------------------------------------- marginals
 
 
@@ -191,40 +218,43 @@ class Marginal:
 
     # -- JAX side: transform and density ------------------------------------------------------------------
     def to_unconstrained(self, x):
-        """u [-] from x [SI] (elementwise, any shape)."""
-        x = jnp.asarray(x, dtype=jnp.float64)
+        """u [-] from x [SI] (elementwise, any shape); NumPy in, NumPy out, otherwise JAX."""
+        xp = _ops(x)
+        x = _as_array(x, xp)
         kind = self.transform
         if kind == "loglogit":
-            return jnp.log(jnp.log(x / self.low)) - jnp.log(jnp.log(self.high / x))
+            return xp.log(xp.log(x / self.low)) - xp.log(xp.log(self.high / x))
         if kind == "logit":
-            return jnp.log(x - self.low) - jnp.log(self.high - x)
+            return xp.log(x - self.low) - xp.log(self.high - x)
         if kind == "log":
-            return jnp.log(x - self.low)
+            return xp.log(x - self.low)
         return x
 
     def from_unconstrained(self, u):
-        """``(x, ln|dx/du|)`` from u (elementwise). Stable for large |u|; x may round onto a bound."""
-        u = jnp.asarray(u, dtype=jnp.float64)
+        """``(x, ln|dx/du|)`` from u (elementwise). Stable for large |u|; x may round onto a bound. NumPy in,
+        NumPy out, otherwise JAX."""
+        xp = _ops(u)
+        u = _as_array(u, xp)
         kind = self.transform
-        log_jac_logistic = jax.nn.log_sigmoid(u) + jax.nn.log_sigmoid(-u)
+        log_jac_logistic = xp.log_sigmoid(u) + xp.log_sigmoid(-u)
         if kind == "loglogit":
             span = math.log(self.high / self.low)
-            y = jnp.where(
-                u < 0, math.log(self.low) + span * jax.nn.sigmoid(u), math.log(self.high) - span * jax.nn.sigmoid(-u)
+            y = xp.where(
+                u < 0, math.log(self.low) + span * xp.sigmoid(u), math.log(self.high) - span * xp.sigmoid(-u)
             )
-            return jnp.exp(y), y + math.log(span) + log_jac_logistic
+            return xp.exp(y), y + math.log(span) + log_jac_logistic
         if kind == "logit":
             span = self.high - self.low
             # exp(log_sigmoid) keeps x = low + tiny representable where sigmoid(u) itself would underflow.
-            x = jnp.where(
+            x = xp.where(
                 u < 0,
-                self.low + jnp.exp(math.log(span) + jax.nn.log_sigmoid(u)),
-                self.high - jnp.exp(math.log(span) + jax.nn.log_sigmoid(-u)),
+                self.low + xp.exp(math.log(span) + xp.log_sigmoid(u)),
+                self.high - xp.exp(math.log(span) + xp.log_sigmoid(-u)),
             )
             return x, math.log(span) + log_jac_logistic
         if kind == "log":
-            return self.low + jnp.exp(u), u
-        return u, jnp.zeros_like(u)
+            return self.low + xp.exp(u), u
+        return u, xp.zeros_like(u)
 
     def inside(self, x):
         """True where x is in the support (closed; open at 0 for the log-scale distributions)."""
@@ -317,11 +347,13 @@ class Prior:
 
     def to_unconstrained(self, params: Mapping[str, float]):
         """Unconstrained vector u, shape (d,), from a dict name -> value [SI] (extra keys ignored)."""
-        return jnp.stack([self.marginals[n].to_unconstrained(params[n]) for n in self.names])
+        values = [params[n] for n in self.names]
+        return _ops(*values).stack([self.marginals[n].to_unconstrained(v) for n, v in zip(self.names, values)])
 
     def from_unconstrained(self, u) -> dict:
-        """dict name -> value [SI] from u of shape (..., d); values have shape (...)."""
-        u = jnp.asarray(u, dtype=jnp.float64)
+        """dict name -> value [SI] from u of shape (..., d); values have shape (...). NumPy in, NumPy out,
+        otherwise JAX."""
+        u = _as_array(u, _ops(u))
         return {n: self.marginals[n].from_unconstrained(u[..., i])[0] for i, n in enumerate(self.names)}
 
     def log_prob(self, u):
