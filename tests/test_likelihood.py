@@ -2,6 +2,8 @@
 the likelihood surface of a stiffness parameter."""
 
 from dataclasses import replace
+from functools import partial
+from types import MappingProxyType
 
 import jax
 import jax.numpy as jnp
@@ -13,6 +15,7 @@ from hypothesis import strategies as st
 from peano_bayes.inference.likelihood import (
     DEFAULT_BIN_SIZES,
     DEFAULT_BINS_PER_SEGMENT,
+    Observations,
     bin_means,
     log_likelihood,
     pointwise_log_likelihood,
@@ -78,23 +81,35 @@ def test_prepare_stacks_runs_and_keeps_every_sample(dataset):
     assert cycle.observed.shape[0] == 2  # the 0 kPa and the test-pressure cycle, one vmapped simulation
 
 
+@partial(jax.jit, static_argnums=2)
+def _total_and_pointwise(params, groups, geometry):
+    """The total and the pointwise log-likelihood from one compiled program: the run groups are an argument,
+    not constants of the program, so the tests of this module evaluating ``dataset`` share it."""
+    obs = Observations((), groups, MappingProxyType({}), geometry)
+    return log_likelihood(params, obs), pointwise_log_likelihood(params, obs)
+
+
+def _likelihood_of(obs):
+    """``params -> (total, pointwise)`` on ``obs``."""
+    return lambda params: _total_and_pointwise(params, obs.groups, obs.geometry)
+
+
 def test_likelihood_prefers_the_truth_and_is_consistent(dataset, truth):
     obs = prepare(dataset)
-    ll = jax.jit(lambda p: log_likelihood(p, obs))
-    at_truth = float(ll({**truth, **NOISE}))
+    ll = _likelihood_of(obs)
+    at_truth, pointwise = ll({**truth, **NOISE})
+    at_truth = float(at_truth)
     assert np.isfinite(at_truth)
     for name in ("tensile_ka_n_per_m", "bending_k2_n", "friction_force_n"):
-        assert float(ll({**truth, **NOISE, name: truth[name] * 1.5})) < at_truth - 10.0, name
-    pointwise = jax.jit(lambda p: pointwise_log_likelihood(p, obs))({**truth, **NOISE})
+        assert float(ll({**truth, **NOISE, name: truth[name] * 1.5})[0]) < at_truth - 10.0, name
     assert sum(float(jnp.sum(p)) for p in pointwise) == pytest.approx(at_truth, rel=1e-12)
     assert sum(p.size for p in pointwise) == obs.n_bins
 
 
 def test_bad_parameters_give_minus_infinity_not_nan(dataset, truth):
-    obs = prepare(dataset)
-    ll = jax.jit(lambda p: log_likelihood(p, obs))
+    ll = _likelihood_of(prepare(dataset))
     for bad in ({"tensile_ka_n_per_m": jnp.nan}, {"noise_load_cycle_force_n": -1.0}, {"length_fraction": -0.5}):
-        value = float(ll({**truth, **NOISE, **bad}))
+        value = float(ll({**truth, **NOISE, **bad})[0])
         assert value == -np.inf, bad
 
 

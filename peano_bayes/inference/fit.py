@@ -97,9 +97,9 @@ def _prior_spread(prior: Prior, seed: int) -> jnp.ndarray:
 def _residuals_and_solver_ok(observations: Observations, prior: Prior, config: ModelConfig, noise, spread, fixed):
     """``evaluate(u, groups) -> (residuals (n,), solver_ok, predictions)``: the weighted residuals of the run
     ``groups`` (those of ``observations`` or others of the same shapes), whether every simulation met its
-    solver tolerance (:data:`SOLVER_TOLERANCE`) and each group's prediction (r, m), from one simulation. The groups are an argument, not a constant of
-    the compiled program, so materials whose data shapes and prior agree share one program through the
-    persistent compilation cache."""
+    solver tolerance (:data:`SOLVER_TOLERANCE`) and each group's prediction (r, m), from one simulation. The
+    groups are an argument, not a constant of the compiled program, so materials whose data shapes and prior
+    agree share one program through the persistent compilation cache."""
     centre = prior.median_unconstrained()
 
     def evaluate(u, groups):

@@ -131,10 +131,11 @@ def fit_veale(pressure_pa, strain, force_n, tube_width_m: float, tube_length_m: 
     eps, f = jnp.asarray(strain[keep]), np.asarray(force_n[keep])
     scale = float(np.std(force_n)) or 1.0
 
-    force = jax.jit(lambda log_k: veale_force(p, eps, _with_stiffness(geometry, log_k)))
+    # The bins are arguments, not constants of the compiled program (constants make XLA's compile slow).
+    force = jax.jit(lambda log_k, p, eps: veale_force(p, eps, _with_stiffness(geometry, log_k)))
 
     def residual(log_k):
-        predicted = np.asarray(force(jnp.asarray(log_k)))
+        predicted = np.asarray(force(jnp.asarray(log_k), p, eps))
         return np.where(np.isfinite(predicted), (predicted - f) / scale, 1e3)
 
     start = np.log([float(getattr(VEALE_TABLE2, k)) for k in _STIFFNESS])

@@ -63,17 +63,24 @@ def _predictions(posterior: Posterior, thetas: np.ndarray, rng: np.random.Genera
     obs = posterior.observations
     kw = dict(config=posterior.config, geometry=obs.geometry, family=posterior.family)
 
-    def one(theta):
+    def one(theta, groups):
         params = posterior.params(theta)
-        parts = []
-        for group in obs.groups:
-            ok = np.isfinite(group.observed)
-            parts.append([a[ok] for a in group_log_likelihood(params, group, **kw)])
-        return tuple(jnp.concatenate(column) for column in zip(*parts, strict=True))
+        return [group_log_likelihood(params, group, **kw) for group in groups]
 
-    f = jax.jit(jax.vmap(one))
-    outs = [f(thetas[i : i + 64]) for i in range(0, thetas.shape[0], 64)]
-    mean, scale, ll = (np.concatenate([np.asarray(o[k]) for o in outs]) for k in range(3))
+    # The run groups are an argument, not constants of the program (constants of that size make XLA's compile
+    # slow, and tie the program to one dataset); the measured bins are picked out afterwards.
+    f = jax.jit(jax.vmap(one, in_axes=(0, None)))
+    measured = [np.isfinite(group.observed) for group in obs.groups]
+    n, rows = thetas.shape[0], min(64, thetas.shape[0])
+    padded = np.concatenate([thetas, np.repeat(thetas[-1:], -n % rows, axis=0)])  # one batch shape, one compile
+    outs = []
+    for i in range(0, padded.shape[0], rows):
+        per_group = f(jnp.asarray(padded[i : i + rows]), obs.groups)
+        outs.append(
+            [np.concatenate([np.asarray(g[k])[:, ok] for g, ok in zip(per_group, measured, strict=True)], axis=1)
+             for k in range(3)]
+        )  # fmt: skip
+    mean, scale, ll = (np.concatenate([o[k] for o in outs])[:n] for k in range(3))
     return ll, mean + scale * rng.standard_normal(mean.shape)
 
 
