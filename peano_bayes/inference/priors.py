@@ -348,7 +348,8 @@ class Prior:
     def to_unconstrained(self, params: Mapping[str, float]):
         """Unconstrained vector u, shape (d,), from a dict name -> value [SI] (extra keys ignored)."""
         values = [params[n] for n in self.names]
-        return _ops(*values).stack([self.marginals[n].to_unconstrained(v) for n, v in zip(self.names, values, strict=True)])
+        columns = [self.marginals[n].to_unconstrained(v) for n, v in zip(self.names, values, strict=True)]
+        return _ops(*values).stack(columns)
 
     def from_unconstrained(self, u) -> dict:
         """dict name -> value [SI] from u of shape (..., d); values have shape (...). NumPy in, NumPy out,
