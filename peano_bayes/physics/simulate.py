@@ -36,14 +36,17 @@ from .model import (
 _LOG_THETA = (float(jnp.log(THETA_MIN)), float(jnp.log(THETA_MAX)))
 #: Newton corrections per sample after the bisection; quasi-static tests converge to ~1e-12 m in three.
 QUASI_STATIC_ITERATIONS = 3
-DYNAMIC_ITERATIONS = 5
+#: Newton corrections per step-test substep after its bisection (see :data:`_DYNAMIC_BRACKET_ATOL`).
+DYNAMIC_ITERATIONS = 3
 COLD_START_ITERATIONS = 4
 _BISECTION_MAX_STEPS = 256
 _BRACKET_ATOL = 1e-3
 _LOCAL_HALF_WIDTH = 0.01
 #: The step test's residual (the inertial term m/dt^2 makes it steep) and the sub-micrometre smoothing of
-#: friction at rest make Newton unreliable from 1e-3; bisect much closer first.
-_DYNAMIC_BRACKET_ATOL = 1e-9
+#: friction at rest make Newton unreliable from 1e-3 (and, on TP, from 1e-5); bisect to 1e-7 first, after
+#: which three Newton steps reach the root that bisecting to 1e-9 and five steps reach (predicted strain within
+#: 2e-8, the same force imbalance) at 1.3-1.7x the speed: ``experiments/bench_step_solve.py``.
+_DYNAMIC_BRACKET_ATOL = 1e-7
 
 
 # --- protocols ----------------------------------------------------------------------------------------------
