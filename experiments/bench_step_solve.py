@@ -28,7 +28,6 @@ from peano_bayes.bundled import DATA_DIR
 from peano_bayes.data import load
 from peano_bayes.inference import likelihood, prepare, prior_for
 
-
 REFERENCE = {"bracket_atol": 1e-9, "newton_steps": 5}
 OURS = {"bracket_atol": simulate._DYNAMIC_BRACKET_ATOL, "newton_steps": simulate.DYNAMIC_ITERATIONS}
 
