@@ -49,6 +49,7 @@ then in the priors directory.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import tomllib
@@ -133,6 +134,12 @@ def _ops(*values):
 
 def _as_array(x, ops):
     return jnp.asarray(x, dtype=jnp.float64) if ops is _JaxOps else np.asarray(x, dtype=np.float64)
+
+
+def _quiet(ops):
+    """NumPy's floating-point warnings off, as JAX has none: a value on a bound maps to an infinite u either
+    way, silently."""
+    return np.errstate(all="ignore") if ops is _NumpyOps else contextlib.nullcontext()
 
 
 # ----------------------------------------------------------------------------------------------- marginals
@@ -220,7 +227,10 @@ class Marginal:
     def to_unconstrained(self, x):
         """u [-] from x [SI] (elementwise, any shape); NumPy in, NumPy out, otherwise JAX."""
         xp = _ops(x)
-        x = _as_array(x, xp)
+        with _quiet(xp):
+            return self._to_unconstrained(_as_array(x, xp), xp)
+
+    def _to_unconstrained(self, x, xp):
         kind = self.transform
         if kind == "loglogit":
             return xp.log(xp.log(x / self.low)) - xp.log(xp.log(self.high / x))
@@ -234,7 +244,10 @@ class Marginal:
         """``(x, ln|dx/du|)`` from u (elementwise). Stable for large |u|; x may round onto a bound. NumPy in,
         NumPy out, otherwise JAX."""
         xp = _ops(u)
-        u = _as_array(u, xp)
+        with _quiet(xp):
+            return self._from_unconstrained(_as_array(u, xp), xp)
+
+    def _from_unconstrained(self, u, xp):
         kind = self.transform
         log_jac_logistic = xp.log_sigmoid(u) + xp.log_sigmoid(-u)
         if kind == "loglogit":
