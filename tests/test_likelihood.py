@@ -113,6 +113,21 @@ def test_bad_parameters_give_minus_infinity_not_nan(dataset, truth):
         assert value == -np.inf, bad
 
 
+def test_a_geometry_with_array_fields_predicts_as_one_with_floats(dataset, truth):
+    """Predictions go through one compiled program that takes the geometry as a static (hashed) argument; a
+    geometry holding arrays, which cannot be hashed, is simulated directly and gives the same prediction."""
+    obs = prepare(only(dataset, "blocking"))
+    group, geometry = obs.groups[0], obs.geometry
+    with_arrays = replace(geometry, tube_width_m=jnp.asarray(geometry.tube_width_m))
+    with pytest.raises(TypeError):
+        hash(with_arrays)
+    expected, _ = predict(truth, group, geometry=geometry)
+    got, _ = predict(truth, group, geometry=with_arrays)
+    # Op by op against one fused program: the same arithmetic, rounded in another order (and root solves that
+    # stop within 1e-12 of their root), so equal to 1e-9, not bit for bit.
+    np.testing.assert_allclose(np.asarray(got), np.asarray(expected), rtol=1e-9, atol=0.0)
+
+
 def test_binning_barely_moves_the_likelihood_surface(dataset, truth):
     """Profile of the tensile stiffness on the load cycles, raw (k = 1) against binned (k = 4): the maximum
     moves by less than 2 % and the curvature (Fisher information) by less than 15 %."""

@@ -594,9 +594,20 @@ def _predict_sets(params, group: RunGroup, strain, pressure_pa, config: ModelCon
 
 #: :func:`_predict_sets` behind one stable ``jax.jit``: every program that contains a prediction (least
 #: squares, its Jacobian, the mode search, the batched log posterior, the pointwise values and predictive
-#: draws) reuses its traced program for given shapes, configuration and geometry, and differentiates or
-#: vectorizes that program instead of running the physics' Python again (tracing it costs seconds).
+#: draws) reuses its traced program, and differentiates or vectorizes that program instead of running the
+#: physics' Python again (tracing it costs seconds). The program is kept per configuration, geometry, run
+#: group structure (test, run keys) and the names, shapes and dtypes of the parameters.
 _traced_predict_sets = jax.jit(_predict_sets, static_argnums=(4, 5))
+
+
+def _sets_function(geometry: Geometry):
+    """:data:`_traced_predict_sets`, or :func:`_predict_sets` itself for a geometry that cannot be a static
+    argument (array-valued fields are allowed, but not hashable)."""
+    try:
+        hash(geometry)
+    except TypeError:
+        return _predict_sets
+    return _traced_predict_sets
 
 
 def predict(params, group: RunGroup, *, config: ModelConfig = DEFAULT_CONFIG, geometry: Geometry = PAPER_GEOMETRY):
@@ -609,7 +620,7 @@ def predict(params, group: RunGroup, *, config: ModelConfig = DEFAULT_CONFIG, ge
     ``exp(offset[name][s])`` (the hierarchical model of :class:`~peano_bayes.inference.posterior.Posterior`).
     """
     strain, pressure = jnp.asarray(group.strain), jnp.asarray(group.pressure_pa)
-    predicted, error = _traced_predict_sets(params, group, strain, pressure, config, geometry)
+    predicted, error = _sets_function(geometry)(params, group, strain, pressure, config, geometry)
     shared = jnp.asarray(group.shared)
     return predicted[shared], error[shared]
 
@@ -623,7 +634,8 @@ def input_error_jacobian(
     :attr:`RunGroup.pressure_error`), by forward-mode differentiation of the simulation. Compiled once per
     protocol (shapes) and configuration; inside a traced function it is inlined."""
     strain, pressure = jnp.asarray(group.strain), jnp.asarray(group.pressure_pa)
-    fn = lambda s, p: _traced_predict_sets(params, group, s, p, config, geometry)  # noqa: E731
+    sets = _sets_function(geometry)
+    fn = lambda s, p: sets(params, group, s, p, config, geometry)  # noqa: E731
 
     def along(ds, dp):
         (predicted, error), (tangent, _) = jax.jvp(fn, (strain, pressure), (ds, dp))

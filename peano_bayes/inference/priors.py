@@ -128,8 +128,9 @@ class _JaxOps:
 
 
 def _ops(*values):
-    """JAX's functions where any value is a JAX array or tracer, else NumPy's (float64 either way)."""
-    return _JaxOps if any(isinstance(v, jax.Array) for v in values) else _NumpyOps
+    """JAX's functions where any value (or any leaf of a list or tuple of them) is a JAX array or tracer, else
+    NumPy's (float64 either way)."""
+    return _JaxOps if any(isinstance(v, jax.Array) for v in jax.tree_util.tree_leaves(values)) else _NumpyOps
 
 
 def _as_array(x, ops):
@@ -314,7 +315,9 @@ class Prior:
       ``# ==> path <==`` header (store it with the results for provenance).
     - ``label``: the material code or file this prior was loaded for.
 
-    All vector methods are pure JAX and work under ``jit``/``vmap``/``grad`` (float64).
+    All vector methods work under ``jit``/``vmap``/``grad`` (float64). The transforms
+    (``to_unconstrained``, ``from_unconstrained``, ``median_unconstrained``) compute in NumPy and return NumPy
+    when no input is a JAX array (prior draws, stored posterior draws), and in JAX otherwise.
     """
 
     names: tuple[str, ...]
@@ -359,7 +362,8 @@ class Prior:
         return self.select(config.parameter_names() + extra)
 
     def to_unconstrained(self, params: Mapping[str, float]):
-        """Unconstrained vector u, shape (d,), from a dict name -> value [SI] (extra keys ignored)."""
+        """Unconstrained vector u, shape (d,), from a dict name -> value [SI] (extra keys ignored). NumPy in,
+        NumPy out, otherwise JAX."""
         values = [params[n] for n in self.names]
         columns = [self.marginals[n].to_unconstrained(v) for n, v in zip(self.names, values, strict=True)]
         return _ops(*values).stack(columns)
@@ -391,7 +395,7 @@ class Prior:
         return {n: self.marginals[n].median() for n in self.names}
 
     def median_unconstrained(self):
-        """u at the marginal medians, shape (d,)."""
+        """u at the marginal medians, shape (d,), NumPy."""
         return self.to_unconstrained(self.median())
 
     def sample(self, key_or_rng, n: int) -> np.ndarray:
