@@ -45,7 +45,7 @@ _LOCAL_HALF_WIDTH = 0.01
 #: The step test's residual (the inertial term m/dt^2 makes it steep) and the sub-micrometre smoothing of
 #: friction at rest make Newton unreliable from 1e-3 (and, on TP, from 1e-5); bisect to 1e-7 first, after
 #: which three Newton steps reach the root that bisecting to 1e-9 and five steps reach (predicted strain within
-#: 1.7e-8, the same force imbalance) at 1.1-1.8x the speed: ``experiments/bench_step_solve.py``.
+#: 1.7e-8, the same force imbalance) at 1.2-1.8x the speed: ``experiments/bench_step_solve.py``.
 _DYNAMIC_BRACKET_ATOL = 1e-7
 
 
