@@ -61,6 +61,13 @@ SPECIMEN_SD = "specimen_log_sd"
 CONTRAST_PREFIX = "specimen_contrast_"
 
 
+def fixed_batches(thetas: np.ndarray, rows: int) -> list[np.ndarray]:
+    """``thetas`` (n, D) split into batches of exactly ``rows`` points, the last padded with copies of the last
+    point, so a compiled function sees one batch shape; the caller keeps the first n results."""
+    padded = np.concatenate([thetas, np.repeat(thetas[-1:], -thetas.shape[0] % rows, axis=0)])
+    return [padded[i : i + rows] for i in range(0, padded.shape[0], rows)]
+
+
 def helmert(n: int) -> np.ndarray:
     """(n, n-1) orthonormal contrasts: columns orthogonal to each other and to the ones vector."""
     h = np.zeros((n, max(n - 1, 0)))
@@ -223,8 +230,7 @@ class Posterior:
             n = thetas.shape[0]
             if not rows or n == rows:
                 return np.asarray(f(jnp.asarray(thetas), groups))
-            padded = np.concatenate([thetas, np.repeat(thetas[-1:], -n % rows, axis=0)])
-            parts = [np.asarray(f(jnp.asarray(padded[i : i + rows]), groups)) for i in range(0, len(padded), rows)]
+            parts = [np.asarray(f(jnp.asarray(batch), groups)) for batch in fixed_batches(thetas, rows)]
             return np.concatenate(parts)[:n]
 
         return call
@@ -329,5 +335,6 @@ __all__ = [
     "STEP_ONLY_PARAMETERS",
     "Posterior",
     "build_posterior",
+    "fixed_batches",
     "helmert",
 ]

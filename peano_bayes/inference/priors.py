@@ -49,7 +49,6 @@ then in the priors directory.
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import math
 import tomllib
@@ -137,11 +136,6 @@ def _as_array(x, ops):
     return jnp.asarray(x, dtype=jnp.float64) if ops is _JaxOps else np.asarray(x, dtype=np.float64)
 
 
-def _quiet(ops):
-    """NumPy's floating-point warnings off, as JAX has none: a value on a bound maps to an infinite u either
-    way, silently."""
-    return np.errstate(all="ignore") if ops is _NumpyOps else contextlib.nullcontext()
-
 
 # ----------------------------------------------------------------------------------------------- marginals
 
@@ -228,7 +222,7 @@ class Marginal:
     def to_unconstrained(self, x):
         """u [-] from x [SI] (elementwise, any shape); NumPy in, NumPy out, otherwise JAX."""
         xp = _ops(x)
-        with _quiet(xp):
+        with np.errstate(all="ignore"):  # silent like JAX: a value on a bound maps to an infinity
             return self._to_unconstrained(_as_array(x, xp), xp)
 
     def _to_unconstrained(self, x, xp):
@@ -245,7 +239,7 @@ class Marginal:
         """``(x, ln|dx/du|)`` from u (elementwise). Stable for large |u|; x may round onto a bound. NumPy in,
         NumPy out, otherwise JAX."""
         xp = _ops(u)
-        with _quiet(xp):
+        with np.errstate(all="ignore"):  # silent like JAX: a value on a bound maps to an infinity
             return self._from_unconstrained(_as_array(u, xp), xp)
 
     def _from_unconstrained(self, u, xp):

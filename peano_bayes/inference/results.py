@@ -27,7 +27,7 @@ from ..atomic import replacing
 from ..errors import PeanoBayesInputError
 from ..physics import ModelConfig
 from .likelihood import group_log_likelihood
-from .posterior import STEP_ONLY_PARAMETERS, Posterior
+from .posterior import STEP_ONLY_PARAMETERS, Posterior, fixed_batches
 from .priors import load_prior
 from .sample import SampleResult
 
@@ -71,11 +71,10 @@ def _predictions(posterior: Posterior, thetas: np.ndarray, rng: np.random.Genera
     # slow, and tie the program to one dataset); the measured bins are picked out afterwards.
     f = jax.jit(jax.vmap(one, in_axes=(0, None)))
     measured = [np.isfinite(group.observed) for group in obs.groups]
-    n, rows = thetas.shape[0], min(64, thetas.shape[0])
-    padded = np.concatenate([thetas, np.repeat(thetas[-1:], -n % rows, axis=0)])  # one batch shape, one compile
+    n = thetas.shape[0]
     outs = []
-    for i in range(0, padded.shape[0], rows):
-        per_group = f(jnp.asarray(padded[i : i + rows]), obs.groups)
+    for batch in fixed_batches(thetas, min(64, n)):  # one batch shape, one compile
+        per_group = f(jnp.asarray(batch), obs.groups)
         outs.append(
             [np.concatenate([np.asarray(g[k])[:, ok] for g, ok in zip(per_group, measured, strict=True)], axis=1)
              for k in range(3)]
