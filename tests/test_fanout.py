@@ -82,7 +82,7 @@ def test_the_command_line_refuses_a_bad_scheduler_before_anything_runs(tmp_path)
     assert not out.exists()
 
 
-# --- three real units on a Dask LocalCluster, one worker killed mid-unit ---------------------------------------
+# --- two real units on a Dask LocalCluster, one worker killed mid-unit -----------------------------------------
 
 FIT = dict(tests=("load_cycle",), n_starts=1, n_walkers=18, n_ensembles=2, chunk=40, max_steps=120, warmup=80, seed=4)
 
