@@ -52,6 +52,7 @@ from .physics import (
     simulate_stroke,
     static_strain,
 )
+from .physics.reference import VEALE_TABLE2, veale_blocking_force, veale_force, veale_free_strain
 
 # --- settings -------------------------------------------------------------------------------------------------
 
@@ -577,6 +578,146 @@ def simulate_dataset(
     )
 
 
+# --- the same protocol on another physics: Veale's force-balance model ------------------------------------------
+
+#: The tests Veale's static model can run (it has no dynamics, so no step response).
+VEALE_TESTS: tuple[str, ...] = ("load_cycle", "blocking", "stroke")
+#: Fields of :class:`~peano_bayes.physics.reference.VealeParameters` that vary between specimens (stiffnesses).
+VEALE_VARYING = ("tensile_ka_n_per_m", "tensile_kb_n_per_m2", "bending_quartic_n_per_m5", "bending_linear_n_per_m2")
+#: Halvings of the strain bracket in :func:`_veale_strain_at_force` (0.5 in strain to below 1e-15).
+_VEALE_BISECTIONS = 60
+
+
+@jax.jit
+def _veale_strain_at_force(pressure_pa, force_n, params):
+    """Strain [-] at which Veale's muscle carries ``force_n`` [N] at each ``pressure_pa`` [Pa] (any shape).
+
+    The force falls monotonically with strain between a strongly stretched muscle (-0.3) and the free strain
+    (force 0), so bisection over that bracket finds the one root of a positive ``force_n``."""
+    pressure_pa = jnp.asarray(pressure_pa, dtype=jnp.float64)
+
+    def halve(_, bracket):
+        low, high = bracket
+        mid = 0.5 * (low + high)
+        above = veale_force(pressure_pa, mid, params) > force_n
+        return jnp.where(above, mid, low), jnp.where(above, high, mid)
+
+    start = (jnp.full(pressure_pa.shape, -0.3), veale_free_strain(pressure_pa, params))
+    low, high = jax.lax.fori_loop(0, _VEALE_BISECTIONS, halve, start)
+    return 0.5 * (low + high)
+
+
+_veale_force = jax.jit(veale_force)
+_veale_blocking_force = jax.jit(veale_blocking_force)
+
+
+def _veale_truths(params, spec: MaterialSpec, protocol: RigProtocol, tests) -> list[_Truth]:
+    """The noise-free signals of every test condition of one specimen of Veale's model, in session order."""
+    p_test = spec.test_pressure_pa
+    slow = partial(_sample_times, protocol.quasi_static_rate_hz)
+    truths = []
+    if "load_cycle" in tests:
+        t = slow(protocol.cycle_duration_s)
+        for condition, p in enumerate((0.0, p_test)):
+            start = float(_veale_strain_at_force(p, spec.start_tension_n, params))
+            low = min(protocol.stretch_strain, start - protocol.min_stretch)
+            strain = np.interp(t, [0.0, 0.5 * t[-1], t[-1]], [start, low, start])
+            force = np.asarray(_veale_force(p, strain, params), dtype=float)
+            truths.append(_Truth("load_cycle", condition, t, np.full_like(t, p), strain, force))
+    if "blocking" in tests:
+        t = slow(protocol.ramp_duration_s)
+        ramp = p_test * t / t[-1]
+        force = np.asarray(_veale_blocking_force(ramp, params), dtype=float)
+        truths.append(_Truth("blocking", 0, t, ramp, np.zeros_like(t), force))
+    if "stroke" in tests:
+        t = slow(protocol.ramp_duration_s)
+        ramp = p_test * t / t[-1]
+        strain = np.asarray(_veale_strain_at_force(ramp, protocol.stroke_load_n, params), dtype=float)
+        truths.append(_Truth("stroke", 0, t, ramp, strain, load_n=protocol.stroke_load_n))
+    for truth in truths:
+        signals = [truth.strain] + ([truth.force_n] if truth.force_n is not None else [])
+        if not all(np.all(np.isfinite(x)) for x in signals):
+            raise RigSimulationError(f"Veale's model gave non-finite signals in the {truth.test} test")
+    return truths
+
+
+def simulate_veale_dataset(
+    material: str | MaterialSpec,
+    params=None,
+    *,
+    seed: int = 0,
+    noise: RigNoise = DEFAULT_NOISE,
+    specimen_spread: float = 0.05,
+    repeats: int = 3,
+    specimens: int = 2,
+    tests: Iterable[str] = VEALE_TESTS,
+    protocol: RigProtocol = DEFAULT_PROTOCOL,
+) -> Dataset:
+    """The rig's quasi-static protocol run on Veale's force-balance model instead of peano_bayes' own physics:
+    data from another model of the same muscle, for checks that must not share the fitted model's assumptions
+    (an inference on it cannot succeed by construction).
+
+    Same protocol, conditions, sensor noise, seeding and file layout as :func:`simulate_dataset`, with the
+    signals of :func:`~peano_bayes.physics.reference.veale_force`: load cycles from the strain at the start
+    tension down to ``stretch_strain`` and back (static: no hysteresis), the blocking force along the pressure
+    ramp, and the stroke test's strain where the muscle carries the hanging load. ``params``: a
+    :class:`~peano_bayes.physics.reference.VealeParameters` (default: the paper's Table 2); each specimen
+    multiplies the stiffnesses of :data:`VEALE_VARYING` by its own log-normal factor of sigma
+    ``specimen_spread``. ``tests``: some of :data:`VEALE_TESTS`. The provenance names the generating model and
+    every specimen's parameters. Raises :class:`~peano_bayes.errors.PeanoBayesInputError` for bad input
+    (a step test among them: the static model has no dynamics), before anything is simulated.
+    """
+    params = VEALE_TABLE2 if params is None else params
+    spec = materials.material(material)
+    seed = _check_count("seed", seed, 0, 2**63 - 1)
+    repeats = _check_count("repeats", repeats, 1, 100)
+    specimens = _check_count("specimens", specimens, 1, len(string.ascii_uppercase))
+    tests = _check_tests(tests)
+    if "step" in tests:
+        raise PeanoBayesInputError(
+            "Veale's force-balance model is static and cannot run a step test; expected some of "
+            + ", ".join(VEALE_TESTS)
+        )
+    if not (isinstance(specimen_spread, int | float) and 0 <= specimen_spread <= 1):
+        raise PeanoBayesInputError(f"specimen_spread must be a number in [0, 1], got {specimen_spread!r}")
+    base = {f.name: float(getattr(params, f.name)) for f in dataclasses.fields(params)}
+    runs, per_specimen = [], {}
+    for index in range(specimens):
+        label = string.ascii_uppercase[index]
+        rng = np.random.default_rng([seed, _SPECIMEN_STREAM, index])
+        own = {k: v * float(np.exp(specimen_spread * rng.standard_normal())) if k in VEALE_VARYING else v
+               for k, v in base.items()}  # fmt: skip
+        per_specimen[label] = own
+        for truth in _veale_truths(type(params)(**own), spec, protocol, tests):
+            first_run = truth.condition * repeats
+            for number in range(first_run, first_run + repeats):
+                rng = np.random.default_rng([seed, _NOISE_STREAM, index, RIG_TESTS.index(truth.test), number])
+                runs.append(Run(label, truth.test, number, **_measure(truth, rng, noise, None)))
+    from . import __version__
+
+    return Dataset(
+        material=spec.data_material(),
+        geometry=GEOMETRY,
+        conditions=spec.conditions(),
+        runs=_fill_optional(runs),
+        provenance={
+            "source": "synthetic: Veale's force-balance model (peano_bayes.rig.simulate_veale_dataset), not a "
+            "measurement and not peano_bayes' own physics",
+            "synthetic": "true",
+            "generator": f"peano_bayes {__version__}",
+            "seed": str(seed),
+            "model": "veale_force_balance",
+            "parameters": json.dumps(base),
+            "specimen_spread": repr(float(specimen_spread)),
+            "specimen_parameters": json.dumps(per_specimen),
+            "noise": json.dumps(_fields(noise)),
+            "drift": "false",
+            "protocol": json.dumps(_fields(protocol)),
+            "runs": f"load_cycle runs 0-{repeats - 1} at 0 kPa, {repeats}-{2 * repeats - 1} at the test pressure",
+        },
+    )
+
+
 def _fill_optional(runs: list[Run]) -> tuple[Run, ...]:
     """Give every run the optional signals any run has (NaN where it does not measure them)."""
     present = [name for name in OPTIONAL_SIGNALS if any(getattr(r, name) is not None for r in runs)]
@@ -629,5 +770,7 @@ __all__ = [
     "read_parameter_file",
     "resolve_parameters",
     "simulate_dataset",
+    "simulate_veale_dataset",
     "specimen_parameters",
+    "VEALE_TESTS",
 ]

@@ -224,3 +224,49 @@ def test_cli_simulate_bad_input(tmp_path, capsys, extra, params_text, message):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and message in err and err.startswith("peano-bayes simulate: error:")
     assert not out.exists() and not out.with_suffix(".toml").exists()
+
+
+# --- the same protocol on Veale's force-balance model ----------------------------------------------------------
+
+
+def test_veale_rig_runs_the_protocol_on_the_other_physics(tmp_path):
+    """Noise-free, one specimen: each load cycle starts at the start tension and stretches to the protocol's
+    strain, the stroke strain is where the muscle carries the hanging load, and the blocking force ends at
+    Veale's blocking force at the test pressure; the file round trip keeps everything."""
+    import jax
+
+    from peano_bayes.physics.reference import VEALE_TABLE2, veale_force
+    from peano_bayes.rig import DEFAULT_PROTOCOL, simulate_veale_dataset
+
+    force = jax.jit(veale_force)  # one compiled program, not an op-by-op root find per call
+
+    spec = MATERIALS["TP"]
+    quiet = simulate_veale_dataset("TP", seed=1, noise=QUIET, specimen_spread=0.0, specimens=1, repeats=1)
+    assert quiet.tests == ("load_cycle", "blocking", "stroke") and "Veale" in quiet.provenance["source"]
+    runs = by_key(quiet)
+    for number in (0, 1):
+        cycle = runs[("A", "load_cycle", number)]
+        assert cycle.force_n[0] == pytest.approx(spec.start_tension_n, abs=1e-6)
+        assert cycle.strain.min() == pytest.approx(DEFAULT_PROTOCOL.stretch_strain, abs=1e-12)
+        assert np.all(np.diff(cycle.force_n[: len(cycle) // 2]) > 0)  # stretching raises the force
+    stroke = runs[("A", "stroke", 0)]
+    carried = np.asarray(force(stroke.pressure_pa, stroke.strain, VEALE_TABLE2))
+    np.testing.assert_allclose(carried, DEFAULT_PROTOCOL.stroke_load_n, rtol=0, atol=1e-6)
+    assert np.all(np.diff(stroke.strain) > 0)  # more pressure, more contraction under the same load
+    blocking = runs[("A", "blocking", 0)]
+    assert blocking.force_n[-1] == pytest.approx(float(force(spec.test_pressure_pa, 0.0, VEALE_TABLE2)), rel=1e-12)
+
+    noisy = simulate_veale_dataset("TP", seed=2, specimens=2, repeats=2)
+    assert_same_runs(noisy, load(save(noisy, tmp_path / "veale")), rtol=1e-12)
+    specimens = json.loads(noisy.provenance["specimen_parameters"])
+    assert specimens["A"]["tensile_ka_n_per_m"] != specimens["B"]["tensile_ka_n_per_m"]
+    assert specimens["A"]["linkage_m"] == specimens["B"]["linkage_m"] == float(VEALE_TABLE2.linkage_m)
+
+
+def test_veale_rig_refuses_a_step_test_before_simulating():
+    from peano_bayes.rig import simulate_veale_dataset
+
+    with pytest.raises(PeanoBayesInputError, match="static and cannot run a step test"):
+        simulate_veale_dataset("TP", tests=("load_cycle", "step"))
+    with pytest.raises(PeanoBayesInputError, match="specimen_spread"):
+        simulate_veale_dataset("TP", specimen_spread=2.0)
