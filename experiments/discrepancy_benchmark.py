@@ -2,8 +2,9 @@
 
 Cases (peano_bayes.validation.discovery_benchmark): each hideable library effect at several signal-to-noise ratios; no
 effect at several noise levels (false positives); slow load-cell drift (outside the library); two effects at
-once. ``--seeds`` seeds per case, starting at ``--first-seed`` (default 10000). The label never reaches
-``discover``.
+once; and a null on another physics (``none-veale``: data from Veale's force-balance model, where any named
+physics effect is a false positive). ``--seeds`` seeds per case, starting at ``--first-seed`` (default
+10000). The label never reaches ``discover``.
 
 **Seeds.** A final run uses seeds no earlier run used, so the workflow is never judged on the data it was
 tuned on. The tests use 100-199; every other seed below 12000 is spent (the runs behind them are in the git history of
@@ -52,7 +53,7 @@ HERE = Path(__file__).resolve().parent
 TWO_EFFECTS = ("hysteresis", "flow_restriction")
 
 
-CASE_LABELS = (*HIDEABLE, "none", "drift", "+".join(TWO_EFFECTS))
+CASE_LABELS = (*HIDEABLE, "none", "drift", "+".join(TWO_EFFECTS), "none-veale")
 
 
 def cases(snrs, noise_levels, only=None) -> list[Case]:
@@ -60,6 +61,7 @@ def cases(snrs, noise_levels, only=None) -> list[Case]:
     out = [Case((e,), snr) for snr in snrs for e in HIDEABLE]
     out += [Case(force_sd_n=sd) for sd in noise_levels]
     out += [Case(drift=True), Case(TWO_EFFECTS, max(snrs))]
+    out += [Case(physics="veale")]  # the null on another physics: Veale's force-balance model
     return [c for c in out if only is None or c.label in only]
 
 
@@ -166,6 +168,8 @@ def analyse(rows: list[dict], out: Path, pooled_from=()) -> dict:
     fp.to_csv(out / "false_positives.csv", index=False)
     drift = df[df["drift"]]
     drift_ok = int(drift["correct"].sum())
+    other = df[df["label"] == "none-veale"]  # the null on another physics (Veale's force-balance model)
+    other_fp = int(other["false_positive"].sum())
     two = df[df["effects"].map(len) == 2]
     hits = df[df["correct"] & (df["effects"].map(len) > 0)]
     gap = hits.groupby("row")["gap_ratio"].agg(["count", "median", "max"])
@@ -180,6 +184,8 @@ def analyse(rows: list[dict], out: Path, pooled_from=()) -> dict:
         "false_positive_wilson_high_max": float(fp["wilson_high"].max()) if len(fp) else None,
         "drift_unexplained_or_none": drift_ok / len(drift) if len(drift) else None,
         "drift_wilson_low": wilson_interval(drift_ok, len(drift))[0] if len(drift) else None,
+        "other_physics_false_positive_rate": other_fp / len(other) if len(other) else None,
+        "other_physics_false_positive_wilson_high": wilson_interval(other_fp, len(other))[1] if len(other) else None,
         "two_effects_exact": float(two["correct"].mean()) if len(two) else None,
         "gap_ratio_median_on_hits": float(hits["gap_ratio"].median()) if len(hits) else None,
         "gap_share_at_most_half_on_hits": float(np.mean(hits["gap_ratio"] <= 0.5)) if len(hits) else None,
@@ -211,6 +217,15 @@ def analyse(rows: list[dict], out: Path, pooled_from=()) -> dict:
         *(
             [f"## Out of library (load-cell drift): unexplained or none in {drift_ok} of {len(drift)}", ""]
             if len(drift)
+            else []
+        ),
+        *(
+            [
+                f"## Another physics (Veale's force-balance model, nothing hidden): a physics effect named in "
+                f"{other_fp} of {len(other)}",
+                "",
+            ]
+            if len(other)
             else []
         ),
         *(

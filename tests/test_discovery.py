@@ -45,6 +45,7 @@ from peano_bayes.validation.discovery_benchmark import (
     TRUTH_PARAMS,
     Case,
     hidden_dataset,
+    run_key,
     score,
     true_parameters,
 )
@@ -541,3 +542,28 @@ def test_report_says_the_tensile_stiffness_stands_for_a_mount_it_lacks():
     assert "two mounts of different stiffness" in note
     assert _absorbed_notes(["tensile_stiffness", "series_compliance"]) == []
     assert _absorbed_notes(["bending_stiffness", "hysteresis"]) == []
+
+
+def test_the_other_physics_null_comes_from_veales_model_and_is_scored_as_a_null():
+    """The null case on other physics: data from Veale's force-balance model (quasi-static tests only); `none`
+    or `unexplained` is right, any named effect is a false positive; it cannot hide effects or drift."""
+    case = Case(physics="veale")
+    assert case.label == "none-veale" and run_key(case, 5).startswith("none-veale|")
+    data = hidden_dataset(case, 5)
+    assert data.provenance["model"] == "veale_force_balance" and data.tests == ("load_cycle", "blocking", "stroke")
+    assert len(data.specimens) == 1
+    gap = {"load_cycle": {"held_out": {"standardized_rmse": 2.0, "rmse": 1.0}}}
+
+    def report(verdict, named):
+        return {"verdict": verdict, "named": named, "ambiguous": [], "gap": {"before": gap, "after": gap}}
+
+    for verdict in ("none", "unexplained"):
+        row = score(case, report(verdict, []))
+        assert row["correct"] and not row["false_positive"], verdict
+    wrong = score(case, report("named", ["hysteresis"]))
+    assert not wrong["correct"] and wrong["false_positive"]
+    assert not score(Case(), report("unexplained", []))["correct"]  # on our own physics a null stays `none`
+    with pytest.raises(ValueError, match="null case"):
+        Case(("hysteresis",), 2.0, physics="veale")
+    with pytest.raises(ValueError, match="physics must be one of"):
+        Case(physics="abaqus")

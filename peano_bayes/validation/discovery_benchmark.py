@@ -30,7 +30,7 @@ from ..discovery.effects import CONFUSABLE, OPEN_ORIFICE_M2, PHYSICS_EFFECTS
 from ..discovery.model import DEFAULT_BASE, NAMES, ModelSpec, model_spec
 from ..inference.likelihood import OBSERVED, SPECIMEN_SCALED
 from ..physics import ModelConfig
-from ..rig import RigNoise, RigProtocol, RigSimulationError, simulate_dataset
+from ..rig import RigNoise, RigProtocol, RigSimulationError, simulate_dataset, simulate_veale_dataset
 
 MATERIAL = "PC"
 TRUTH_CONFIG = ModelConfig(bending=True, tensile=True, extension=False, friction="none")
@@ -44,6 +44,8 @@ PROTOCOL = RigProtocol(
     step_substeps=2,
 )
 REPEATS = 3
+#: Where a case's data come from: the package's own physics, or Veale's force-balance model (a null case).
+PHYSICS = ("peano", "veale")
 #: Reference force noise [N] at which SNRs are calibrated; strain noise scales with it (2e-4 per 0.2 N).
 REFERENCE_FORCE_SD_N = 0.2
 #: Load-cell drift of the out-of-library case [N/s] (about 0.7 N over one specimen's session).
@@ -85,16 +87,28 @@ NOT_HIDEABLE = tuple(e for e in PHYSICS_EFFECTS if e not in REFERENCE)
 class Case:
     """What the rig hides. ``effects`` names (empty: none); ``snr`` of each; ``drift`` load-cell drift (out of
     library); ``force_sd_n`` the load cell's noise [N] (strain noise scales with it); ``pressure_sd_pa`` the
-    pressure sensors' noise [Pa] (default the rig's, :class:`~peano_bayes.rig.RigNoise`; probes shrink it)."""
+    pressure sensors' noise [Pa] (default the rig's, :class:`~peano_bayes.rig.RigNoise`; probes shrink it).
+    ``physics``: ``"peano"`` (the package's own model, the default) or ``"veale"``, a null case whose data come
+    from another model of the same muscle (:func:`~peano_bayes.rig.simulate_veale_dataset`, Table 2 values,
+    quasi-static tests only): no library effect is hidden, so naming one is a false positive."""
 
     effects: tuple[str, ...] = ()
     snr: float = 0.0
     drift: bool = False
     force_sd_n: float = REFERENCE_FORCE_SD_N
     pressure_sd_pa: float = RigNoise.pressure_sd_pa
+    physics: str = "peano"
+
+    def __post_init__(self):
+        if self.physics not in PHYSICS:
+            raise ValueError(f"Case.physics must be one of {', '.join(PHYSICS)}, got {self.physics!r}")
+        if self.physics != "peano" and (self.effects or self.drift):
+            raise ValueError("a case on other physics is a null case: no hidden effects and no drift")
 
     @property
     def label(self) -> str:
+        if self.physics != "peano":
+            return f"none-{self.physics}"
         if self.drift:
             return "drift"
         return "+".join(self.effects) if self.effects else "none"
@@ -207,6 +221,9 @@ def strength_for_snr(effect: str, snr: float, iterations: int = 12) -> float:
 
 def hidden_dataset(case: Case, seed: int, strengths: dict | None = None) -> Dataset:
     """The rig dataset of ``case`` (strengths by effect, default calibrated by :func:`strength_for_snr`)."""
+    if case.physics == "veale":
+        noise = rig_noise(case.force_sd_n, case.pressure_sd_pa)
+        return simulate_veale_dataset(MATERIAL, seed=seed, noise=noise, specimens=1, repeats=REPEATS, protocol=PROTOCOL)
     strengths = strengths or {e: strength_for_snr(e, case.snr) for e in case.effects}
     params, quirks, softening = _truth(case.effects, strengths)
     return _simulate(params, quirks, seed, rig_noise(case.force_sd_n, case.pressure_sd_pa), case.drift, softening)
@@ -228,8 +245,10 @@ def score(case: Case, report: dict) -> dict:
     for a in report["ambiguous"]:
         named |= set(a["effects"])
     truth = set(case.effects)
-    if case.drift or not truth:
-        correct = report["verdict"] in (("none", "unexplained") if case.drift else ("none",))
+    if case.drift or case.physics != "peano":  # out of the library: nothing to name, a misfit may remain
+        correct = report["verdict"] in ("none", "unexplained")
+    elif not truth:
+        correct = report["verdict"] == "none"
     elif report["verdict"] == "ambiguous":
         sets = [frozenset(a["effects"]) for a in report["ambiguous"]]
         correct = (
