@@ -478,6 +478,32 @@ def _check_tests(tests: Iterable[str]) -> tuple[str, ...]:
     return tuple(t for t in RIG_TESTS if t in tests)
 
 
+def _check_run(seed, repeats, specimens, tests, specimen_spread) -> tuple[int, int, int, tuple[str, ...]]:
+    """The checked ``(seed, repeats, specimens, tests)`` of a simulated session, and a valid ``specimen_spread``."""
+    checked = (
+        _check_count("seed", seed, 0, 2**63 - 1),
+        _check_count("repeats", repeats, 1, 100),
+        _check_count("specimens", specimens, 1, len(string.ascii_uppercase)),
+        _check_tests(tests),
+    )
+    if not (isinstance(specimen_spread, int | float) and 0 <= specimen_spread <= 1):
+        raise PeanoBayesInputError(f"specimen_spread must be a number in [0, 1], got {specimen_spread!r}")
+    return checked
+
+
+def _session_runs(label: str, index: int, truths, *, seed: int, noise: RigNoise, repeats: int, drift: bool):
+    """Specimen ``label``'s measured runs: ``repeats`` noisy repeats of each noise-free truth, in session order
+    (noise streams keyed by specimen ``index``, test and run number; drift grows over the session)."""
+    runs, session_s = [], 0.0
+    for truth in truths:
+        first_run = truth.condition * repeats
+        for number in range(first_run, first_run + repeats):
+            rng = np.random.default_rng([seed, _NOISE_STREAM, index, RIG_TESTS.index(truth.test), number])
+            runs.append(Run(label, truth.test, number, **_measure(truth, rng, noise, session_s if drift else None)))
+            session_s += float(truth.time_s[-1])
+    return runs
+
+
 def _fields(obj) -> dict:
     return {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)}
 
@@ -535,12 +561,7 @@ def simulate_dataset(
     quirk_names = check_quirks(quirks)
     final_config = apply_quirks(config, quirk_names)
     params, fallback = resolve_parameters(true_params, final_config)
-    seed = _check_count("seed", seed, 0, 2**63 - 1)
-    repeats = _check_count("repeats", repeats, 1, 100)
-    specimens = _check_count("specimens", specimens, 1, len(string.ascii_uppercase))
-    tests = _check_tests(tests)
-    if not (isinstance(specimen_spread, int | float) and 0 <= specimen_spread <= 1):
-        raise PeanoBayesInputError(f"specimen_spread must be a number in [0, 1], got {specimen_spread!r}")
+    seed, repeats, specimens, tests = _check_run(seed, repeats, specimens, tests, specimen_spread)
     report = progress or (lambda line: None)
 
     runs, per_specimen = [], {}
@@ -548,26 +569,19 @@ def simulate_dataset(
         label = string.ascii_uppercase[index]
         own = specimen_parameters(params, specimen_spread, np.random.default_rng([seed, _SPECIMEN_STREAM, index]))
         per_specimen[label] = own
-        session_s = 0.0
-        for truth in _specimen_truths(own, spec, final_config, protocol, tests, report, label):
-            first_run = truth.condition * repeats
-            for number in range(first_run, first_run + repeats):
-                rng = np.random.default_rng([seed, _NOISE_STREAM, index, RIG_TESTS.index(truth.test), number])
-                signals = _measure(truth, rng, noise, session_s if drift else None)
-                runs.append(Run(label, truth.test, number, **signals))
-                session_s += float(truth.time_s[-1])
+        truths = _specimen_truths(own, spec, final_config, protocol, tests, report, label)
+        runs += _session_runs(label, index, truths, seed=seed, noise=noise, repeats=repeats, drift=drift)
     return Dataset(
         material=spec.data_material(),
         geometry=GEOMETRY,
         conditions=spec.conditions(),
         runs=_fill_optional(runs),
         provenance=_provenance(
+            source="synthetic: peano_bayes virtual rig (peano_bayes.rig.simulate_dataset), not a measurement",
             seed=seed,
-            quirks=quirk_names,
-            config=final_config,
-            params=params,
-            fallback=fallback,
-            ignored=tuple(name for name in (true_params or {}) if name not in params),
+            model=_model_provenance(
+                quirk_names, final_config, params, fallback, tuple(n for n in (true_params or {}) if n not in params)
+            ),
             per_specimen=per_specimen,
             noise=noise,
             drift=drift,
@@ -634,10 +648,9 @@ def _veale_truths(params, spec: MaterialSpec, protocol: RigProtocol, tests) -> l
         ramp = p_test * t / t[-1]
         strain = np.asarray(_veale_strain_at_force(ramp, protocol.stroke_load_n, params), dtype=float)
         truths.append(_Truth("stroke", 0, t, ramp, strain, load_n=protocol.stroke_load_n))
-    for truth in truths:
-        signals = [truth.strain] + ([truth.force_n] if truth.force_n is not None else [])
-        if not all(np.all(np.isfinite(x)) for x in signals):
-            raise RigSimulationError(f"Veale's model gave non-finite signals in the {truth.test} test")
+    for truth in truths:  # a static model has no solver residual: only the signals are checked
+        signals = [x for x in (truth.strain, truth.force_n) if x is not None]
+        _checked(f"Veale's model, {truth.test} test", (signals, 0.0), 0.0, "")
     return truths
 
 
@@ -669,17 +682,12 @@ def simulate_veale_dataset(
     """
     params = VEALE_TABLE2 if params is None else params
     spec = materials.material(material)
-    seed = _check_count("seed", seed, 0, 2**63 - 1)
-    repeats = _check_count("repeats", repeats, 1, 100)
-    specimens = _check_count("specimens", specimens, 1, len(string.ascii_uppercase))
-    tests = _check_tests(tests)
+    seed, repeats, specimens, tests = _check_run(seed, repeats, specimens, tests, specimen_spread)
     if "step" in tests:
         raise PeanoBayesInputError(
             "Veale's force-balance model is static and cannot run a step test; expected some of "
             + ", ".join(VEALE_TESTS)
         )
-    if not (isinstance(specimen_spread, int | float) and 0 <= specimen_spread <= 1):
-        raise PeanoBayesInputError(f"specimen_spread must be a number in [0, 1], got {specimen_spread!r}")
     base = {f.name: float(getattr(params, f.name)) for f in dataclasses.fields(params)}
     runs, per_specimen = [], {}
     for index in range(specimens):
@@ -688,33 +696,25 @@ def simulate_veale_dataset(
         own = {k: v * float(np.exp(specimen_spread * rng.standard_normal())) if k in VEALE_VARYING else v
                for k, v in base.items()}  # fmt: skip
         per_specimen[label] = own
-        for truth in _veale_truths(type(params)(**own), spec, protocol, tests):
-            first_run = truth.condition * repeats
-            for number in range(first_run, first_run + repeats):
-                rng = np.random.default_rng([seed, _NOISE_STREAM, index, RIG_TESTS.index(truth.test), number])
-                runs.append(Run(label, truth.test, number, **_measure(truth, rng, noise, None)))
-    from . import __version__
-
+        truths = _veale_truths(type(params)(**own), spec, protocol, tests)
+        runs += _session_runs(label, index, truths, seed=seed, noise=noise, repeats=repeats, drift=False)
     return Dataset(
         material=spec.data_material(),
         geometry=GEOMETRY,
         conditions=spec.conditions(),
         runs=_fill_optional(runs),
-        provenance={
-            "source": "synthetic: Veale's force-balance model (peano_bayes.rig.simulate_veale_dataset), not a "
+        provenance=_provenance(
+            source="synthetic: Veale's force-balance model (peano_bayes.rig.simulate_veale_dataset), not a "
             "measurement and not peano_bayes' own physics",
-            "synthetic": "true",
-            "generator": f"peano_bayes {__version__}",
-            "seed": str(seed),
-            "model": "veale_force_balance",
-            "parameters": json.dumps(base),
-            "specimen_spread": repr(float(specimen_spread)),
-            "specimen_parameters": json.dumps(per_specimen),
-            "noise": json.dumps(_fields(noise)),
-            "drift": "false",
-            "protocol": json.dumps(_fields(protocol)),
-            "runs": f"load_cycle runs 0-{repeats - 1} at 0 kPa, {repeats}-{2 * repeats - 1} at the test pressure",
-        },
+            seed=seed,
+            model={"model": "veale_force_balance", "parameters": json.dumps(base)},
+            per_specimen=per_specimen,
+            noise=noise,
+            drift=False,
+            spread=specimen_spread,
+            protocol=protocol,
+            repeats=repeats,
+        ),
     )
 
 
@@ -728,29 +728,33 @@ def _fill_optional(runs: list[Run]) -> tuple[Run, ...]:
     return tuple(filled)
 
 
-def _provenance(
-    *, seed, quirks, config, params, fallback, ignored, per_specimen, noise, drift, spread, protocol, repeats
-) -> dict[str, str]:
-    """The sidecar's ``[provenance]``: every fact needed to regenerate the data, as strings (JSON for tables)."""
+def _model_provenance(quirks, config, params, fallback, ignored) -> dict[str, str]:
+    """The provenance entries of data from the package's own physics: quirks, configuration and parameters."""
+    return {
+        "quirks": ", ".join(quirks) if quirks else "none",
+        "config": json.dumps(_fields(config)),
+        "parameters": json.dumps(params),
+        "nominal_fallback": ", ".join(fallback) if fallback else "none",
+        "ignored_parameters": ", ".join(ignored) if ignored else "none",
+    }
+
+
+def _provenance(*, source, seed, model, per_specimen, noise, drift, spread, protocol, repeats) -> dict[str, str]:
+    """The sidecar's ``[provenance]``: every fact needed to regenerate the data, as strings (JSON for tables);
+    ``model``: the generating model's own entries, placed after the seed."""
     from . import __version__
 
-    dumps = json.dumps
-
     return {
-        "source": "synthetic: peano_bayes virtual rig (peano_bayes.rig.simulate_dataset), not a measurement",
+        "source": source,
         "synthetic": "true",
         "generator": f"peano_bayes {__version__}",
         "seed": str(seed),
-        "quirks": ", ".join(quirks) if quirks else "none",
-        "config": dumps(_fields(config)),
-        "parameters": dumps(params),
-        "nominal_fallback": ", ".join(fallback) if fallback else "none",
-        "ignored_parameters": ", ".join(ignored) if ignored else "none",
+        **model,
         "specimen_spread": repr(float(spread)),
-        "specimen_parameters": dumps(per_specimen),
-        "noise": dumps(_fields(noise)),
+        "specimen_parameters": json.dumps(per_specimen),
+        "noise": json.dumps(_fields(noise)),
         "drift": "true" if drift else "false",
-        "protocol": dumps(_fields(protocol)),
+        "protocol": json.dumps(_fields(protocol)),
         "runs": f"load_cycle runs 0-{repeats - 1} at 0 kPa, {repeats}-{2 * repeats - 1} at the test pressure",
     }
 
