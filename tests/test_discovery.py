@@ -37,7 +37,15 @@ from peano_bayes.discovery.model import (
     to_unconstrained,
     to_values,
 )
-from peano_bayes.discovery.workflow import Gates, identified, preference_order, strength_wald, within_two_se
+from peano_bayes.discovery.workflow import (
+    Gates,
+    identified,
+    preference_order,
+    refit_candidates,
+    signature_outcomes,
+    strength_wald,
+    within_two_se,
+)
 from peano_bayes.inference.likelihood import predict, prepare
 from peano_bayes.validation.discovery_benchmark import (
     HIDEABLE,
@@ -447,6 +455,38 @@ def test_sensor_offset_and_gain_compete_with_physics_but_widening_noise_comes_la
         "hysteresis",
     ]
     assert names(passing(heteroscedastic_noise=5.0)) == ["heteroscedastic_noise"]
+
+
+def test_a_significant_signature_reaches_every_candidate_the_registry_lists_for_it():
+    """A loading/unloading split significant after Holm gets hysteresis and relaxation refitted even when the
+    one-step screen promised them nothing (from zero friction the gradient vanishes); a signature that is not
+    significant adds nothing beyond the screen's top few; the report names each candidate's failed gates."""
+    from types import SimpleNamespace
+
+    inactive = ["hysteresis", "viscoelastic_relaxation", "series_compliance", "sensor_offset", "sensor_gain",
+                "threshold_pressure", "strain_stiffening", "heteroscedastic_noise", "session_baseline"]
+    gates = Gates(screen=2, alpha=0.01)
+    gain = {"series_compliance": 9.0, "sensor_offset": 7.0, "sensor_gain": 5.0, "threshold_pressure": 3.0,
+            "strain_stiffening": 1.0, "hysteresis": 0.0, "viscoelastic_relaxation": 0.0}
+    quiet = {"loading_split": 0.2, "noise_level": 0.5, "force_level": 0.3}
+    ranked, by_signature = refit_candidates(inactive, gain, quiet, gates)
+    assert ranked == ["series_compliance", "sensor_offset", "session_baseline"] and by_signature == {}
+    loud = {**quiet, "loading_split": 1e-4, "noise_level": 0.003}
+    ranked, by_signature = refit_candidates(inactive, gain, loud, gates)
+    assert ranked == ["series_compliance", "sensor_offset", "hysteresis", "viscoelastic_relaxation",
+                      "heteroscedastic_noise", "session_baseline"]
+    assert by_signature == {"loading_split": ["hysteresis", "viscoelastic_relaxation"],
+                            "noise_level": ["heteroscedastic_noise"]}
+    scored = [SimpleNamespace(name="hysteresis", evidence={"gates": {"parsimony": False, "identified": True}})]
+    outcomes = signature_outcomes(by_signature, loud, scored)
+    assert outcomes["loading_split"] == {"p_holm": 1e-4, "candidates": {"hysteresis": ["parsimony"],
+                                                                          "viscoelastic_relaxation": None}}
+    from peano_bayes.discovery.report import _signature_lines
+
+    text = "\n".join(_signature_lines([outcomes]))
+    assert "round 1, `loading_split` (Holm p 0.0001): `hysteresis` (failed: parsimony); " in text
+    assert "`viscoelastic_relaxation` (its fit failed)" in text
+    assert _signature_lines([{}, {}]) == []
 
 
 def test_held_out_ties_within_two_standard_errors_of_block_sums():

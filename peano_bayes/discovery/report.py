@@ -100,6 +100,26 @@ def _absorbed_notes(final_model) -> list[str]:
     return lines
 
 
+def _signature_lines(rounds: list) -> list[str]:
+    """Each round's significant signatures with the library candidates tried for them and the gates each failed."""
+    if not any(rounds):
+        return []
+    lines = ["", "## Significant signatures and their candidates", ""]
+    for i, signatures in enumerate(rounds, 1):
+        for name, entry in signatures.items():
+            tried = []
+            for effect, failed in entry["candidates"].items():
+                if failed is None:
+                    tried.append(f"`{effect}` (its fit failed)")
+                else:
+                    tried.append(f"`{effect}` ({'passed every gate' if not failed else 'failed: ' + ', '.join(failed)})")
+            lines.append(
+                f"- round {i}, `{name}` (Holm p {entry['p_holm']:.2g}): "
+                + ("; ".join(tried) if tried else "no candidate left in the library (all already in the model)")
+            )
+    return lines
+
+
 def report_markdown(report: dict) -> str:
     """The report in words a materials engineer reads."""
     lines = [f"# Discovery report: specimen {report['specimen']}", ""]
@@ -207,6 +227,7 @@ def report_markdown(report: dict) -> str:
             failed = [g for g, ok in ev["gates"].items() if not ok]
             status = "passed every gate" if ev["passed"] else f"failed: {', '.join(failed)}"
             lines.append(f"- round {i}, `{name}` ({LIBRARY[name].kind}): delta elpd {ev['delta_elpd']:.1f}; {status}")
+    lines += _signature_lines(report.get("signatures", []))
     lines += [
         "",
         "Held-out runs are the last repeat of every test condition; gates and thresholds: "

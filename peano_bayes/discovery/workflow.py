@@ -4,8 +4,10 @@ best one only if it passes every gate, repeat.
 **Screening** (every iteration, whether or not the diagnosis flags structure): the candidates not yet in the
 model are ranked by the decrease of squared residuals one Gauss-Newton step promises from near their off
 values (a score statistic); the top :attr:`Gates.screen` are refitted (all parameters free, the new effect
-started near off) in one vmapped solve, plus the heteroscedastic noise option when its signature is
-significant and the flexible session baseline until it is in the model.
+started near off) in one vmapped solve, plus every candidate the registry lists for a signature that is
+significant after Holm (whatever its screen promised; :func:`refit_candidates`) and the flexible session
+baseline until it is in the model. The report lists each significant signature with the candidates tried for
+it and the gates each failed (``signatures``, one entry per round).
 
 **Gates** (:class:`Gates`), all must pass:
 1. predictive gain on held-out runs: ``delta elpd >= min_delta_elpd`` and ``delta elpd / se >= min_elpd_z``,
@@ -325,6 +327,36 @@ def preference_order(passing: list) -> list:
     return sorted(preferred or passing, key=lambda c: -c.evidence["delta_elpd"])
 
 
+def refit_candidates(inactive, gain: dict, p_holm: dict, gates: Gates) -> tuple[list, dict]:
+    """Which inactive effects one round refits, and why.
+
+    Returns ``(ranked, by_signature)``: ``ranked`` the effects to refit, in order: the ``gates.screen`` best by
+    the Gauss-Newton ``gain`` (effect -> promised decrease of squared residuals), then every effect the registry
+    lists for a residual signature that is significant after Holm (``p_holm`` signature -> p, below
+    ``gates.alpha``; this includes the effects screened by signature alone, :data:`SCREENED_BY_SIGNATURE`), then
+    the flexible terms; ``by_signature`` each significant signature -> its inactive candidates. A one-step
+    screen from an effect's off value can promise nothing where the gradient vanishes there (a friction loop
+    from zero friction), so a significant signature always reaches its candidates, whatever they promised.
+    """
+    significant = [k for k in p_holm if p_holm[k] < gates.alpha]
+    by_signature = {k: [e for e in inactive if LIBRARY[e].signature == k] for k in significant}
+    ranked = sorted(gain, key=lambda e: -gain[e])[: gates.screen]
+    for k in significant:
+        ranked += [e for e in by_signature[k] if e not in ranked and e not in FLEXIBLE_TERMS]
+    ranked += [e for e in inactive if e in FLEXIBLE_TERMS]
+    return ranked, by_signature
+
+
+def signature_outcomes(by_signature: dict, p_holm: dict, candidates: list) -> dict:
+    """Per significant signature of one round: its Holm p-value and, for each library candidate of it, the
+    gates it failed (``[]``: it passed every gate; ``None``: its fit failed)."""
+    scored = {c.name: [g for g, ok in c.evidence["gates"].items() if not ok] for c in candidates}
+    return {
+        k: {"p_holm": float(p_holm[k]), "candidates": {e: scored.get(e) for e in effects}}
+        for k, effects in by_signature.items()
+    }
+
+
 def _diagnosis_dict(d: Diagnosis) -> dict:
     return {
         "structure_left": bool(d.structure_left),
@@ -352,7 +384,8 @@ def discover(split: SplitData, *, base=DEFAULT_BASE, gates: Gates = Gates(), see
     ``ambiguous`` rival sets with the experiment that separates them,
     ``steps`` (per accepted effect: evidence, gates, parameters with Laplace sd, RMSE before and after, the
     ``rivals`` of a confusable pair and other ``close_calls`` within two standard errors),
-    ``screened`` (every candidate's evidence per iteration), ``gap`` (base vs final, fit and held-out),
+    ``screened`` (every candidate's evidence per iteration), ``signatures`` (per iteration, each significant
+    signature with its candidates and the gates each failed, :func:`signature_outcomes`), ``gap`` (base vs final, fit and held-out),
     ``diagnoses`` and timings.
     """
     say = progress or (lambda line: None)
@@ -366,7 +399,7 @@ def discover(split: SplitData, *, base=DEFAULT_BASE, gates: Gates = Gates(), see
         f"base model {'+'.join(base)} fitted: standardized RMSE fit {_rmse(cur_fit.r):.2f}, "
         f"held-out {_rmse(cur_held.r):.2f}"
     )
-    steps, screened, diagnoses = [], [], []
+    steps, screened, diagnoses, signatures = [], [], [], []
     diag = diagnose(cur_fit.r, split.fit_covariates, cur_fit.predicted, alpha=gates.alpha, seed=seed)
     diagnoses.append(_diagnosis_dict(diag))
     stopped = "max_effects"
@@ -382,11 +415,7 @@ def discover(split: SplitData, *, base=DEFAULT_BASE, gates: Gates = Gates(), see
             for e in inactive
             if e not in SCREENED_BY_SIGNATURE and e not in FLEXIBLE_TERMS
         }
-        ranked = sorted(gain, key=lambda e: -gain[e])[: gates.screen]
-        ranked += [
-            e for e in inactive if e in SCREENED_BY_SIGNATURE and diag.p_holm[LIBRARY[e].signature] < gates.alpha
-        ]
-        ranked += [e for e in inactive if e in FLEXIBLE_TERMS]
+        ranked, by_signature = refit_candidates(inactive, gain, diag.p_holm, gates)
         say(
             f"step {len(steps) + 1}: {'structure left' if diag.structure_left else 'no significant structure'}; "
             f"refitting {', '.join(ranked)}"
@@ -398,6 +427,7 @@ def discover(split: SplitData, *, base=DEFAULT_BASE, gates: Gates = Gates(), see
             if f is not None
         ]
         screened.append({c.name: c.evidence | {"passed": c.passed} for c in candidates})
+        signatures.append(signature_outcomes(by_signature, diag.p_holm, candidates))
         passing = [c for c in candidates if c.passed]
         if not passing:
             stopped = "no_candidate_passes" if diag.structure_left else "no_structure"
@@ -459,6 +489,7 @@ def discover(split: SplitData, *, base=DEFAULT_BASE, gates: Gates = Gates(), see
         "noise_sd": split.noise_sd,
         "steps": steps,
         "screened": screened,
+        "signatures": signatures,
         "diagnoses": diagnoses,
         "gap": {"before": gap_table(first_fit, first_held, split), "after": gap_table(cur_fit, cur_held, split)},
         "base_parameters": {p: base_fit.params[p] for p in base_fit.spec.free_names},
@@ -478,5 +509,7 @@ __all__ = [
     "gap_table",
     "identified",
     "preference_order",
+    "refit_candidates",
+    "signature_outcomes",
     "within_two_se",
 ]
