@@ -112,7 +112,8 @@ def _signature_lines(rounds: list) -> list[str]:
                 if failed is None:
                     tried.append(f"`{effect}` (its fit failed)")
                 else:
-                    tried.append(f"`{effect}` ({'passed every gate' if not failed else 'failed: ' + ', '.join(failed)})")
+                    outcome = "passed every gate" if not failed else "failed: " + ", ".join(failed)
+                    tried.append(f"`{effect}` ({outcome})")
             lines.append(
                 f"- round {i}, `{name}` (Holm p {entry['p_holm']:.2g}): "
                 + ("; ".join(tried) if tried else "no candidate left in the library (all already in the model)")

@@ -385,8 +385,8 @@ def discover(split: SplitData, *, base=DEFAULT_BASE, gates: Gates = Gates(), see
     ``steps`` (per accepted effect: evidence, gates, parameters with Laplace sd, RMSE before and after, the
     ``rivals`` of a confusable pair and other ``close_calls`` within two standard errors),
     ``screened`` (every candidate's evidence per iteration), ``signatures`` (per iteration, each significant
-    signature with its candidates and the gates each failed, :func:`signature_outcomes`), ``gap`` (base vs final, fit and held-out),
-    ``diagnoses`` and timings.
+    signature with its candidates and the gates each failed, :func:`signature_outcomes`), ``gap`` (base vs
+    final, fit and held-out), ``diagnoses`` and timings.
     """
     say = progress or (lambda line: None)
     started = time.perf_counter()
