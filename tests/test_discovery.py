@@ -44,6 +44,7 @@ from peano_bayes.discovery.workflow import (
     refit_candidates,
     signature_outcomes,
     strength_wald,
+    within_condition_trend,
     within_two_se,
 )
 from peano_bayes.inference.likelihood import predict, prepare
@@ -489,6 +490,30 @@ def test_a_significant_signature_reaches_every_candidate_the_registry_lists_for_
     assert _signature_lines([{}, {}]) == []
 
 
+def test_drift_is_claimed_only_where_a_conditions_repeats_trend_in_time():
+    """Conditions run in order of pressure, three repeats each, back to back: a misfit that depends on pressure
+    alone trends over the session but not within a condition (no drift claimed); a slow drift shows within
+    every condition's repeats (claimed); a session without repeats cannot show it."""
+    from types import SimpleNamespace
+
+    rng = np.random.default_rng(7)
+    pressures = np.repeat([50e3, 100e3, 150e3, 200e3], 3)  # condition of each run, in session order
+    bins = 40
+    run = np.repeat(np.arange(pressures.size), bins)
+    session = np.arange(run.size) * 0.5  # s
+    cov = SimpleNamespace(test=np.full(run.size, "load_cycle"), run=run, session_s=session,
+                          pressure_pa=np.repeat(pressures, bins) * (1 + 1e-3 * rng.standard_normal(run.size)))
+    noise = rng.standard_normal(run.size)
+    by_pressure = within_condition_trend(noise + 2.0 * (np.repeat(pressures, bins) / 200e3), cov, 0.01)
+    assert by_pressure["conditions"] == 4 and by_pressure["runs"] == 12 and by_pressure["df"] == 7
+    assert not by_pressure["shows_in_time"]
+    drift = within_condition_trend(noise + 2.0 * session / session[-1], cov, 0.01)
+    assert drift["shows_in_time"] and drift["slope_per_hour"] > 0 and drift["p"] < 1e-3
+    single = SimpleNamespace(**{**vars(cov), "pressure_pa": session * 1000.0})  # every run its own condition
+    alone = within_condition_trend(noise, single, 0.01)
+    assert alone["conditions"] == 0 and alone["df"] < 1 and np.isnan(alone["p"]) and not alone["shows_in_time"]
+
+
 def test_held_out_ties_within_two_standard_errors_of_block_sums():
     """A tie: the winner's held-out gain over the other is below two standard errors of its per-block sums. An
     exact tie (equal predictions) is a tie; a gain in every block is not; block sums, not points, set the error."""
@@ -567,6 +592,10 @@ def test_report_names_close_calls_outside_the_confusable_pairs():
     assert "| load_cycle | held-out | 1 | 1 | 0.2 | n/a | 0.5 | no |" in noted
     assert "**not** consistent with noise in: load_cycle (held-out)" in noted
     assert "verdict stands" in text
+    flexible = {**report, "verdict": "unexplained", "described": ["session_baseline"]}
+    assert "re-zero the load cell" in report_markdown({**flexible, "drift_shown": True})
+    ordered = report_markdown({**flexible, "drift_shown": False})
+    assert "re-zero" not in ordered and "show no trend in time" in ordered and "no cause is named" in ordered
     step["close_calls"] = []
     assert "predicted the held-out runs as well" not in report_markdown(report)
 

@@ -134,13 +134,21 @@ def report_markdown(report: dict) -> str:
             )
             for rival, experiment in a["experiment"].items():
                 lines.append(f"- To separate them from {rival}: {experiment}.")
-    elif verdict == "unexplained" and report["described"]:
+    elif verdict == "unexplained" and report["described"] and report.get("drift_shown", True):
         lines.append(
             "**Verdict: unexplained.** The force drifts slowly over the session in a way no effect in the "
             "library produces; a smooth baseline over session time describes it (step "
-            f"{', '.join(f'`{d}`' for d in report['described'])} below), but it names no physics. A load-cell "
-            "drift or a slow change of the specimen are likely: re-zero the load cell between tests, or repeat "
-            "the first test at the end of the session."
+            f"{', '.join(f'`{d}`' for d in report['described'])} below), but it names no physics. The repeats "
+            "of a test condition show the trend in time, so a load-cell drift or a slow change of the specimen "
+            "are likely: re-zero the load cell between tests, or repeat the first test at the end of the session."
+        )
+    elif verdict == "unexplained" and report["described"]:
+        lines.append(
+            "**Verdict: unexplained.** The residuals follow the order of the tests in the session, which a smooth "
+            f"baseline over session time describes (step {', '.join(f'`{d}`' for d in report['described'])} "
+            "below), but the repeats of each test condition show no trend in time: the misfit is ordered with "
+            "the conditions (here, pressure) as much as with time, and no cause is named. Repeating a condition "
+            "at the end of the session would tell a drift from a pressure-dependent misfit."
         )
     elif verdict == "unexplained":
         lines.append(
@@ -151,9 +159,15 @@ def report_markdown(report: dict) -> str:
     else:
         lines.append("**Verdict: none.** No effect beyond the base model is supported by the data.")
     if report["described"] and verdict != "unexplained":
+        trend = (
+            "The force also drifts slowly over the session"
+            if report.get("drift_shown", True)
+            else "The residuals also follow the order of the tests in the session, with no trend within a "
+            "condition's repeats, so no drift is claimed"
+        )
         lines.append(
-            "\nThe force also drifts slowly over the session (described by a smooth baseline, "
-            f"{', '.join(report['described'])}; no library effect explains it)."
+            f"\n{trend} (described by a smooth baseline, {', '.join(report['described'])}; no library effect "
+            "explains it)."
         )
     if report["noise_model"]:
         lines.append(f"\nThe sensor or noise model needed: {', '.join(report['noise_model'])} (not physics).")
@@ -179,6 +193,14 @@ def report_markdown(report: dict) -> str:
             f"statistic {ev['strength_wald']:.1f}, threshold {ev['strength_wald_threshold']:.1f}).",
             f"- Largest correlation with a parameter already in the model: {ev['max_correlation_with_base']:.2f}.",
         ]
+        check = step.get("time_check")
+        if check:
+            shown = "shown" if check["shows_in_time"] else "not shown"
+            lines.append(
+                f"- Trend in time within test conditions ({check['runs']} runs in {check['conditions']} "
+                f"conditions with repeats): {format_number(check['slope_per_hour'])} per hour (noise-level "
+                f"units), p = {format_number(check['p'])}: {shown}."
+            )
         if step["rivals"]:
             lines.append(f"- Rivals within two standard errors: {', '.join(step['rivals'])}.")
         if step.get("close_calls"):

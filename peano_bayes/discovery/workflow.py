@@ -37,8 +37,10 @@ the winner (the rivals and the experiment that separates them are reported; a pa
 pair is screened again once the winner is in the model and, if it too came within two standard errors, is
 reported in the step's ``close_calls``, so the engineer sees the tie without the verdict changing);
 ``unexplained`` when structure is left and no candidate passes, or when the flexible session baseline was
-needed and no physics effect passed; ``none`` otherwise. Noise-side effects that pass are added and reported as
-the noise model, never as physics.
+needed and no physics effect passed; ``none`` otherwise. A drift is claimed (``drift_shown``) only when the
+residuals the session baseline absorbed trend in time within test conditions (:func:`within_condition_trend`,
+the baseline step's ``time_check``); otherwise the report says the misfit is ordered with the conditions.
+Noise-side effects that pass are added and reported as the noise model, never as physics.
 
 **Which passing candidate is accepted:** the one with the largest held-out gain among the physics effects, the
 session baseline and the load cell's offset and gain; heteroscedastic noise (:data:`~.effects.WIDENING_NOISE`)
@@ -60,12 +62,12 @@ against ``max_effects``.
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 from scipy import stats
 
-from .data import SplitData
+from .data import Covariates, SplitData
 from .diagnose import SQUARED, Diagnosis, diagnose, signature_statistic, signature_weights
 from .effects import CONFUSABLE, FLEXIBLE_TERMS, LIBRARY, WIDENING_NOISE, check_effects
 from .fitting import Evaluation, ModelFit, evaluate, fit_models, gauss_newton_gain
@@ -193,6 +195,74 @@ def gap_table(fit_eval: Evaluation, held_eval: Evaluation, split: SplitData) -> 
                 **noise_excess(err, floor[rows]),
             }
     return out
+
+
+#: Run-mean pressures of one test within this fraction (plus :data:`CONDITION_ATOL_PA`) of the previous run's
+#: are one test condition (repeats of one commanded level or ramp).
+CONDITION_RTOL = 0.05
+CONDITION_ATOL_PA = 1000.0
+
+
+def joined_covariates(first: Covariates, second: Covariates) -> Covariates:
+    """The covariates of two residual vectors laid end to end (fit runs, then held-out runs)."""
+    return Covariates(
+        **{f.name: np.concatenate([getattr(first, f.name), getattr(second, f.name)]) for f in fields(Covariates)}
+    )
+
+
+def within_condition_trend(r: np.ndarray, covariates, alpha: float) -> dict:
+    """Whether residuals ``r`` (n,) trend with session time **within** test conditions, across their repeats.
+
+    When conditions run in order of pressure, a trend over the session and a pressure-dependent misfit are the
+    same pattern; only repeats of one condition at different times separate them. The discovery loop passes the
+    fitted and the held-out runs together (:func:`joined_covariates`): the held-out repeat is each condition's
+    last, the one furthest in time. Each run is reduced to its
+    mean residual and mean session time; runs of one test whose mean pressures agree (:data:`CONDITION_RTOL`)
+    form a condition; the pooled within-condition slope of residual on time (each condition centred on its own
+    means) is tested with a t test whose variance comes from the scatter about that slope (so correlated noise
+    within a run does not inflate it). Returns ``slope_per_hour`` [residual units per hour], ``t``, ``p``
+    (two-sided), ``runs``, ``conditions`` (with two or more runs), ``df`` and ``shows_in_time`` (``p < alpha``;
+    False when no condition has repeats at two times, ``df < 1``).
+    """
+    keys = list(zip(covariates.test, covariates.run, strict=True))
+    runs = sorted(set(keys), key=lambda k: (str(k[0]), int(k[1])))
+    index = {k: i for i, k in enumerate(runs)}
+    member = np.array([index[k] for k in keys])
+    ok = np.isfinite(r)
+    count = np.bincount(member[ok], minlength=len(runs))
+    mean = lambda v: np.bincount(member[ok], weights=v[ok], minlength=len(runs)) / np.maximum(count, 1)  # noqa: E731
+    run_r, run_t, run_p = mean(r), mean(covariates.session_s), mean(covariates.pressure_pa)
+    condition = np.full(len(runs), -1)
+    label = 0
+    for test in sorted({str(k[0]) for k in runs}):
+        mine = [i for i, k in enumerate(runs) if str(k[0]) == test and count[i] > 0]
+        previous = None
+        for i in sorted(mine, key=lambda i: run_p[i]):
+            if previous is not None and run_p[i] - previous > CONDITION_RTOL * abs(previous) + CONDITION_ATOL_PA:
+                label += 1
+            condition[i] = label
+            previous = run_p[i]
+        label += 1
+    dt, dr, conditions = [], [], 0
+    for c in np.unique(condition[condition >= 0]):
+        rows = condition == c
+        if rows.sum() < 2 or np.ptp(run_t[rows]) <= 0:
+            continue
+        conditions += 1
+        dt.append(run_t[rows] - run_t[rows].mean())
+        dr.append(run_r[rows] - run_r[rows].mean())
+    n_runs = int(sum(len(x) for x in dt))
+    df = n_runs - conditions - 1
+    out = {"runs": n_runs, "conditions": conditions, "df": df}
+    if df < 1:
+        return out | {"slope_per_hour": float("nan"), "t": float("nan"), "p": float("nan"), "shows_in_time": False}
+    dt, dr = np.concatenate(dt), np.concatenate(dr)
+    slope = float(dt @ dr / (dt @ dt))
+    scatter = float(np.sum((dr - slope * dt) ** 2) / df)
+    se = np.sqrt(scatter / (dt @ dt)) if scatter > 0 else 0.0
+    t = slope / se if se > 0 else float("inf") * np.sign(slope)
+    p = float(2.0 * stats.t.sf(abs(t), df)) if np.isfinite(t) else 0.0
+    return out | {"slope_per_hour": 3600.0 * slope, "t": float(t), "p": p, "shows_in_time": bool(p < alpha)}
 
 
 @dataclass
@@ -453,6 +523,15 @@ def discover(split: SplitData, *, base=DEFAULT_BASE, gates: Gates = Gates(), see
             "parameters": {
                 p: {"value": best.fit.params[p], "sd": best.fit.sd.get(p)} for p in LIBRARY[best.name].params
             },
+            "time_check": (
+                within_condition_trend(
+                    np.concatenate([cur_fit.r, cur_held.r]),
+                    joined_covariates(split.fit_covariates, split.held_out_covariates),
+                    gates.alpha,
+                )
+                if best.name in FLEXIBLE_TERMS
+                else None
+            ),
             "gap_before": gap_table(cur_fit, cur_held, split),
             "gap_after": gap_table(best.fit_eval, best.held_eval, split),
         }
@@ -466,6 +545,8 @@ def discover(split: SplitData, *, base=DEFAULT_BASE, gates: Gates = Gates(), see
         diagnoses.append(_diagnosis_dict(diag))
     named = [s["effect"] for s in steps if s["kind"] == "physics"]
     described = [s["effect"] for s in steps if s["kind"] == "flexible"]
+    # drift is claimed only where the repeats of a condition show the trend in time (not only its order)
+    drift = any(s["time_check"]["shows_in_time"] for s in steps if s["kind"] == "flexible")
     ambiguous = [{"effects": [s["effect"], *s["rivals"]], "experiment": s["experiment"]} for s in steps if s["rivals"]]
     if ambiguous:
         verdict = "ambiguous"
@@ -480,6 +561,7 @@ def discover(split: SplitData, *, base=DEFAULT_BASE, gates: Gates = Gates(), see
         "named": named,
         "noise_model": [s["effect"] for s in steps if s["kind"] == "noise"],
         "described": described,
+        "drift_shown": drift,
         "ambiguous": ambiguous,
         "structure_left": bool(diag.structure_left),
         "stopped": stopped,
@@ -511,5 +593,6 @@ __all__ = [
     "preference_order",
     "refit_candidates",
     "signature_outcomes",
+    "within_condition_trend",
     "within_two_se",
 ]
