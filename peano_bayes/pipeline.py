@@ -31,6 +31,7 @@ from .defaults import (
 )
 from .errors import PeanoBayesInputError
 from .formatting import format_number
+from .inference.coordinates import sampler_coordinates
 from .inference.fit import fit, fit_quality
 from .inference.laplace import posterior_mode, refine_mode
 from .inference.likelihood import prepare
@@ -198,6 +199,7 @@ def infer(
     label: str | None = None,
     figures: bool = True,
     discover: bool = False,
+    coordinates: str = "theta",
     log=print,
 ) -> dict:
     """Fit, sample and write the results of one dataset into ``out_dir/<label>/``; return the summary.
@@ -217,7 +219,8 @@ def infer(
     from the material's configured model, write its report into ``<label>/discovery/`` and sample the
     configured model plus the physics effects it named (:func:`~peano_bayes.discovery.choice.choose_model`; a
     resumed run reads the report instead of running discovery again). ``summary.json``'s ``model`` records the
-    choice either way.
+    choice either way. ``coordinates``: what the sampler moves, ``"theta"`` or ``"tensile_stretch"``
+    (:func:`~peano_bayes.inference.coordinates.sampler_coordinates`).
     """
     timings = {}
     dataset = load(data) if not isinstance(data, Dataset) else data
@@ -294,6 +297,7 @@ def infer(
         resume=resume,
         progress=progress,
         log=lambda m: log(f"{code}: {m}"),
+        coordinates=sampler_coordinates(posterior, coordinates),
     )
     timings["sampling_s"] = result.seconds
     conv = result.convergence
@@ -326,6 +330,7 @@ def infer(
         "steps": int(result.chain.shape[0]),
         "resumed_from_step": result.resumed_from,
         "acceptance": result.acceptance,
+        "sampler_coordinates": sampler_coordinates(posterior, coordinates).describe(),
         "convergence": conv.as_dict(posterior.names),
         "min_ess_per_s": float(np.min(conv.ess_bulk) / max(result.seconds, 1e-9)),
         "parameters": parameter_table(idata, posterior.names, HDI_PROB),

@@ -53,6 +53,7 @@ from scipy import special
 from ..atomic import write_bytes
 from ..defaults import DEFAULT_CHUNK, DEFAULT_ENSEMBLES, DEFAULT_MAX_STEPS, DEFAULT_WARMUP
 from ..errors import PeanoBayesError, PeanoBayesInputError
+from .coordinates import Identity
 from .posterior import Posterior
 
 #: Convergence targets: chains of at least 50 integrated autocorrelation times, rank-normalized split R-hat
@@ -399,14 +400,29 @@ def sample(
     resume: bool = False,
     progress: bool = True,
     log=print,
+    coordinates=None,
 ) -> SampleResult:
     """Run ``n_ensembles`` independent emcee ensembles of ``n_walkers`` walkers on ``posterior``, each started
     from its own draws of N(``centre``, :data:`START_INFLATION`^2 ``covariance``) in theta space (overdispersed,
     so that R-hat can reveal an ensemble stuck in its start): ``warmup`` steps of warm-up, then chunks of at
     most ``chunk`` steps (:func:`planned_chunk`) until converged (:func:`convergence`) or ``max_steps`` in all
     (see the module docstring).
-    ``n_walkers``: see :func:`walker_count`. ``log(message)`` reports each round and chunk."""
+    ``n_walkers``: see :func:`walker_count`. ``log(message)`` reports each round and chunk. ``coordinates``
+    (default theta itself, :class:`~peano_bayes.inference.coordinates.Identity`): what the ensembles move (see
+    :mod:`~peano_bayes.inference.coordinates`); the state file holds those, while the result's chain, log
+    posterior and convergence figures are in theta."""
     start_time = time.perf_counter()
+    coordinates = Identity() if coordinates is None else coordinates
+
+    def density(z):
+        theta, log_jacobian = coordinates.to_theta(z)
+        lp = posterior.batched(theta) + log_jacobian
+        return np.where(np.isfinite(lp), lp, -np.inf)
+
+    def as_theta(z_chain):
+        theta, log_jacobian = coordinates.to_theta(z_chain.reshape(-1, z_chain.shape[-1]))
+        return theta.reshape(z_chain.shape), log_jacobian.reshape(z_chain.shape[:-1])
+
     ndim = posterior.ndim
     per = walker_count(n_walkers, ndim)
     n_ensembles = max(1, int(n_ensembles))
@@ -419,14 +435,17 @@ def sample(
         "n_ensembles": n_ensembles,
         "seed": seed,
         "warmup": warmup,
+        "coordinates": coordinates.describe(),
     }
     chain, lps = np.zeros((0, total, ndim)), np.zeros((0, total))
     if resume and state_path is not None and state_path.exists():
         chain, lps, rng_states, saved = load_state(state_path)
         saved.setdefault("n_ensembles", 1)
+        saved.setdefault("coordinates", {"kind": "theta"})
         if any(saved.get(k) != v for k, v in meta.items()):
             raise PeanoBayesInputError(
-                f"{state_path}: saved state is of another run (names, walkers, ensembles, seed or warm-up differ); "
+                f"{state_path}: saved state is of another run (names, walkers, ensembles, seed, warm-up or sampler "
+                "coordinates differ); "
                 "delete it or run without --resume"
             )
         states = [
@@ -438,6 +457,8 @@ def sample(
         states = []
         for e in range(n_ensembles):
             walkers, lp0 = initial_walkers(posterior, centre, START_INFLATION**2 * covariance, per, seed, e)
+            walkers = coordinates.to_sampler(walkers)
+            lp0 = lp0 + coordinates.to_theta(walkers)[1]
             random_state = np.random.RandomState(_ensemble_seed(seed, e)).get_state()
             states.append(emcee.State(walkers, log_prob=lp0, random_state=random_state))
     resumed_from = chain.shape[0]
@@ -449,7 +470,7 @@ def sample(
         done = chain.shape[0]
         in_warmup = done < warmup
         if result is None and done > warmup:  # resumed after a chunk: plan the next one as the run would have
-            result = convergence(chain, posterior.names, start=warmup, n_ensembles=n_ensembles)
+            result = convergence(as_theta(chain)[0], posterior.names, start=warmup, n_ensembles=n_ensembles)
             if result.converged:
                 break
         if in_warmup:
@@ -463,7 +484,7 @@ def sample(
         for e in range(n_ensembles):
             own = chain[:, e * per : (e + 1) * per]
             sampler = emcee.EnsembleSampler(
-                per, ndim, posterior.batched, vectorize=True, moves=moves_for(proposal_at(own, done, warmup))
+                per, ndim, density, vectorize=True, moves=moves_for(proposal_at(own, done, warmup))
             )
             desc = f"{label} {done}-{done + n}" + (f", ensemble {e + 1}/{n_ensembles}" if n_ensembles > 1 else "")
             try:
@@ -491,7 +512,7 @@ def sample(
         if in_warmup:
             log(f"warm-up step {chain.shape[0]} of {warmup}: acceptance {accepted:.2f}")
             continue
-        result = convergence(chain, posterior.names, start=warmup, n_ensembles=n_ensembles)
+        result = convergence(as_theta(chain)[0], posterior.names, start=warmup, n_ensembles=n_ensembles)
         log(
             f"step {chain.shape[0]}: acceptance {accepted:.2f}, tau_max {np.max(result.tau):.1f}, "
             f"{result.tau_lengths:.0f} tau long, max R-hat {np.max(result.rhat):.3f} ({n_ensembles} ensembles), "
@@ -500,16 +521,17 @@ def sample(
         )
         if result.converged:
             break
+    theta_chain, log_jacobian = as_theta(chain)
     if result is None and chain.shape[0] > warmup:  # resumed at or past the limit: the saved chain as it is
-        result = convergence(chain, posterior.names, start=warmup, n_ensembles=n_ensembles)
+        result = convergence(theta_chain, posterior.names, start=warmup, n_ensembles=n_ensembles)
     if result is None:  # the step limit came inside the warm-up: figures of its second half, never converged
-        result = convergence(chain, posterior.names, start=len(chain) // 2, n_ensembles=n_ensembles)
+        result = convergence(theta_chain, posterior.names, start=len(chain) // 2, n_ensembles=n_ensembles)
         problems = (f"the step limit ({max_steps}) ended the run inside the warm-up ({warmup} steps)",)
         result = dataclasses.replace(result, converged=False, problems=problems + result.problems)
     return SampleResult(
         posterior.names,
-        chain,
-        lps,
+        theta_chain,
+        lps - log_jacobian,
         result,
         time.perf_counter() - start_time,
         accepted,
