@@ -96,6 +96,9 @@ def main() -> None:
     parser.add_argument("--draws", type=int, default=40_000, help="kept draws used for the ellipticity")
     args = parser.parse_args()
     chain, log_prob, _, meta = load_state(args.result / "sampler_state.npz")
+    kind = meta.get("coordinates", {"kind": "theta"})["kind"]
+    if kind != "theta":  # the analysis reads the chain as theta (the parameters in their prior's coordinates)
+        raise SystemExit(f"{args.result}: sampler state in {kind} coordinates; rerun with --coordinates theta")
     names, n_walkers, warmup = list(meta["names"]), int(meta["n_walkers"]), int(meta["warmup"])
     material = args.material or args.result.name
     ensembles = proposal_fit(chain, n_walkers, warmup)

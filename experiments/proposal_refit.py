@@ -41,6 +41,9 @@ def main() -> None:
     enable_compilation_cache()
     code = args.material or args.result.name
     chain, _, _, meta = load_state(args.result / "sampler_state.npz")
+    kind = meta.get("coordinates", {"kind": "theta"})["kind"]
+    if kind != "theta":  # the analysis reads the chain as theta (the parameters in their prior's coordinates)
+        raise SystemExit(f"{args.result}: sampler state in {kind} coordinates; rerun with --coordinates theta")
     per, warmup = int(meta["n_walkers"]), int(meta["warmup"])
     dataset = load(bundled.dataset_path(code))
     dataset = dataclasses.replace(dataset, runs=tuple(r for r in dataset.runs if r.test in DEFAULT_TESTS))

@@ -20,6 +20,7 @@ from . import bundled
 from .defaults import (
     ALL_TESTS,
     DEFAULT_CHUNK,
+    DEFAULT_COORDINATES,
     DEFAULT_ENSEMBLES,
     DEFAULT_MAX_STEPS,
     DEFAULT_STARTS,
@@ -27,6 +28,7 @@ from .defaults import (
     DEFAULT_WARMUP,
 )
 from .errors import PeanoBayesInputError
+from .inference.coordinates import COORDINATE_KINDS
 
 
 @dataclass(frozen=True)
@@ -253,6 +255,13 @@ def _sampling_arguments(p):
         default=DEFAULT_WARMUP,
         help=f"warm-up steps, discarded, that fit the proposal (default: {DEFAULT_WARMUP})",
     )
+    p.add_argument(
+        "--coordinates",
+        choices=COORDINATE_KINDS,
+        default=DEFAULT_COORDINATES,
+        help=f"what the sampler moves: the tensile element as its log stretches at two forces, or theta itself "
+        f"(default: {DEFAULT_COORDINATES}; see docs/inference.md)",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.add_argument(
         "--sample-all",
@@ -289,6 +298,7 @@ def _check_sampling(args):
         progress=not args.no_progress,
         sample_all=args.sample_all,
         discover=args.discover,
+        coordinates=args.coordinates,
     )
 
 
@@ -460,8 +470,10 @@ def prior_command(args):
     text = starting_prior(args.like, material=material)
     write_text(out, text)
     prior = load_prior(out)  # the written file loads as it will in a fit
-    print(f"wrote {out}: the prior of {args.like} ({len(prior.names)} parameters) for material {material}; edit it, "
-          f"then: peano-bayes fit DATA.csv --prior {out}")
+    print(
+        f"wrote {out}: the prior of {args.like} ({len(prior.names)} parameters) for material {material}; edit it, "
+        f"then: peano-bayes fit DATA.csv --prior {out}"
+    )
     return {"prior": str(out), "like": args.like, "material": material, "parameters": list(prior.names)}
 
 
@@ -617,16 +629,20 @@ def discover_command(args):
     from .data import load
     from .discovery import DEFAULT_BASE, Gates, discover, discovery_data, write_report
     from .discovery.effects import check_effects
+
     base = check_effects(args.base.split(",")) if args.base else DEFAULT_BASE
     if args.max_effects < 1:
         raise PeanoBayesInputError(f"--max-effects must be >= 1, got {args.max_effects}")
     dataset = load(bundled.resolve_dataset(args.data))  # validate before anything is written
     split = discovery_data(dataset, specimen=args.specimen, tests=args.tests)
+
     def say(line):
         print(line, flush=True)
 
-    say(f"{len(split.fit_runs)} fitted and {len(split.held_out_runs)} held-out runs of specimen {split.specimen} "
-        "(the first fit compiles the model: a few minutes)")
+    say(
+        f"{len(split.fit_runs)} fitted and {len(split.held_out_runs)} held-out runs of specimen {split.specimen} "
+        "(the first fit compiles the model: a few minutes)"
+    )
     gates = Gates(max_effects=args.max_effects)
     result = discover(split, base=base, gates=gates, seed=args.seed, progress=say)
     written = write_report(result, Path(args.out))
@@ -649,7 +665,10 @@ def _discover_arguments(p):
     )
     p.add_argument("--specimen", default=None, help="specimen to analyse (default: the first in the file)")
     p.add_argument(
-        "--tests", nargs="+", default=None, choices=("load_cycle", "blocking", "stroke", "step"),
+        "--tests",
+        nargs="+",
+        default=None,
+        choices=("load_cycle", "blocking", "stroke", "step"),
         help="tests to use (default: all in the file; a 1 kHz step response is the costly one)",
     )
     p.add_argument("--max-effects", type=int, default=3, help="most effects to add (default: 3)")

@@ -22,6 +22,7 @@ from .data import Dataset, load
 from .defaults import (
     ALL_TESTS,
     DEFAULT_CHUNK,
+    DEFAULT_COORDINATES,
     DEFAULT_ENSEMBLES,
     DEFAULT_MAX_STEPS,
     DEFAULT_STARTS,
@@ -199,7 +200,7 @@ def infer(
     label: str | None = None,
     figures: bool = True,
     discover: bool = False,
-    coordinates: str = "theta",
+    coordinates: str = DEFAULT_COORDINATES,
     log=print,
 ) -> dict:
     """Fit, sample and write the results of one dataset into ``out_dir/<label>/``; return the summary.

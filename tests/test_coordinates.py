@@ -6,6 +6,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from peano_bayes.errors import PeanoBayesInputError
 from peano_bayes.inference.coordinates import KA, KB, Identity, TensileStretch, sampler_coordinates, stretch
 from peano_bayes.inference.priors import prior_for
 from peano_bayes.inference.sample import sample
@@ -75,12 +76,19 @@ def test_a_run_in_stretch_coordinates_samples_the_theta_posterior():
     """The sampler moves the log stretches; the reported chain is theta and has the target's moments (means within
     5 Monte Carlo standard errors, sd within 10 %), and its log posterior is theta's."""
     coords, prior = _coordinates("PR")
-    coords = TensileStretch((0, 1), coords.marginals)
     mean = np.append(np.asarray(prior.to_unconstrained({KA: 2e3, KB: 1e8})), 0.5)
     target = _GaussianInTheta(mean)
     result = sample(
-        target, mean + 0.05, 0.01 * np.eye(3), n_walkers=16, seed=5, chunk=1000, max_steps=20_000, progress=False,
-        log=lambda m: None, coordinates=coords,
+        target,
+        mean + 0.05,
+        0.01 * np.eye(3),
+        n_walkers=16,
+        seed=5,
+        chunk=1000,
+        max_steps=20_000,
+        progress=False,
+        log=lambda m: None,
+        coordinates=coords,
     )
     conv = result.convergence
     assert conv.converged, conv.problems
@@ -89,3 +97,15 @@ def test_a_run_in_stretch_coordinates_samples_the_theta_posterior():
     assert np.all(np.abs(draws.mean(axis=0) - mean) < 5 * se)
     np.testing.assert_allclose(draws.std(axis=0), np.sqrt(np.diag(target.cov)), rtol=0.1)
     np.testing.assert_allclose(result.log_prob[-1], target.batched(result.chain[-1]), atol=1e-9)
+
+
+def test_a_resume_refuses_a_state_written_in_other_coordinates_and_says_which(tmp_path):
+    coords, prior = _coordinates("PR")
+    mean = np.append(np.asarray(prior.to_unconstrained({KA: 2e3, KB: 1e8})), 0.5)
+    target, state = _GaussianInTheta(mean), tmp_path / "state.npz"
+    options = dict(n_walkers=16, seed=5, warmup=10, max_steps=20, progress=False, log=lambda m: None)
+    sample(target, mean, 0.01 * np.eye(3), state_path=state, **options)
+    with pytest.raises(PeanoBayesInputError, match="--coordinates theta resumes it"):
+        sample(target, mean, 0.01 * np.eye(3), state_path=state, resume=True, coordinates=coords, **options)
+    resumed = sample(target, mean, 0.01 * np.eye(3), state_path=state, resume=True, **options)
+    assert resumed.resumed_from == 20

@@ -105,6 +105,10 @@ class TensileStretch:
         return {"kind": "tensile_stretch", "forces_n": list(self.forces)}
 
 
+#: The kinds :func:`sampler_coordinates` knows.
+COORDINATE_KINDS = ("tensile_stretch", "theta")
+
+
 def sampler_coordinates(posterior, kind: str = "theta"):
     """The coordinates ``kind`` (``"theta"`` or ``"tensile_stretch"``) for ``posterior``: tensile stretches only
     where both ``tensile_ka`` and ``tensile_kb`` are sampled (with ``ka`` alone the log stretch is affine in
@@ -120,4 +124,4 @@ def sampler_coordinates(posterior, kind: str = "theta"):
     return TensileStretch((names.index(KA), names.index(KB)), (marginals[KA], marginals[KB]))
 
 
-__all__ = ["STRETCH_FORCES_N", "Identity", "TensileStretch", "sampler_coordinates", "stretch"]
+__all__ = ["COORDINATE_KINDS", "STRETCH_FORCES_N", "Identity", "TensileStretch", "sampler_coordinates", "stretch"]

@@ -446,6 +446,8 @@ def sample(
             raise PeanoBayesInputError(
                 f"{state_path}: saved state is of another run (names, walkers, ensembles, seed, warm-up or sampler "
                 "coordinates differ); "
+                f"it was written in {saved['coordinates']['kind']} coordinates, so --coordinates "
+                f"{saved['coordinates']['kind']} resumes it if the rest matches, else "
                 "delete it or run without --resume"
             )
         states = [
