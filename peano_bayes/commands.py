@@ -19,6 +19,7 @@ from pathlib import Path
 from . import bundled
 from .defaults import (
     ALL_TESTS,
+    COORDINATE_KINDS,
     DEFAULT_CHUNK,
     DEFAULT_COORDINATES,
     DEFAULT_ENSEMBLES,
@@ -28,7 +29,6 @@ from .defaults import (
     DEFAULT_WARMUP,
 )
 from .errors import PeanoBayesInputError
-from .inference.coordinates import COORDINATE_KINDS
 
 
 @dataclass(frozen=True)

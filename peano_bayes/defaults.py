@@ -29,6 +29,8 @@ DEFAULT_WARMUP = 300
 #: (``experiments/coordinates_arms.py``): PR tau_max 40.4 -> 22.7 steps, min bulk ESS 1082 -> 3820; FC 35.2 ->
 #: 30.0, 2490 -> 3823.
 DEFAULT_COORDINATES = "tensile_stretch"
+#: The sampler coordinates there are (``--coordinates``).
+COORDINATE_KINDS = ("tensile_stretch", "theta")
 #: Probability mass of the reported highest-density intervals (arviz's default).
 HDI_PROB = 0.94
 

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..defaults import COORDINATE_KINDS
 from .priors import Marginal
 
 KA, KB = "tensile_ka_n_per_m", "tensile_kb_n_per_m2"
@@ -105,17 +106,13 @@ class TensileStretch:
         return {"kind": "tensile_stretch", "forces_n": list(self.forces)}
 
 
-#: The kinds :func:`sampler_coordinates` knows.
-COORDINATE_KINDS = ("tensile_stretch", "theta")
-
-
 def sampler_coordinates(posterior, kind: str = "theta"):
     """The coordinates ``kind`` (``"theta"`` or ``"tensile_stretch"``) for ``posterior``: tensile stretches only
     where both ``tensile_ka`` and ``tensile_kb`` are sampled (with ``ka`` alone the log stretch is affine in
     its log and changes nothing), else theta itself."""
     if kind == "theta":
         return Identity()
-    if kind != "tensile_stretch":
+    if kind not in COORDINATE_KINDS:
         raise ValueError(f"unknown sampler coordinates {kind!r}; expected 'theta' or 'tensile_stretch'")
     names = posterior.prior.names
     if KA not in names or KB not in names:
