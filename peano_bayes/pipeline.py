@@ -284,6 +284,7 @@ def infer(
             f"{code}: mode on the full likelihood in {laplace.steps} steps, {laplace.seconds:.1f} s, log posterior "
             f"{laplace.log_prob:.1f}" + (f" ({laplace.status})" if laplace.status else "")
         )
+    sampler = sampler_coordinates(posterior, coordinates)
     result = sample(
         posterior,
         centre,
@@ -298,7 +299,7 @@ def infer(
         resume=resume,
         progress=progress,
         log=lambda m: log(f"{code}: {m}"),
-        coordinates=sampler_coordinates(posterior, coordinates),
+        coordinates=sampler,
     )
     timings["sampling_s"] = result.seconds
     conv = result.convergence
@@ -331,7 +332,7 @@ def infer(
         "steps": int(result.chain.shape[0]),
         "resumed_from_step": result.resumed_from,
         "acceptance": result.acceptance,
-        "sampler_coordinates": sampler_coordinates(posterior, coordinates).describe(),
+        "sampler_coordinates": sampler.describe(),
         "convergence": conv.as_dict(posterior.names),
         "min_ess_per_s": float(np.min(conv.ess_bulk) / max(result.seconds, 1e-9)),
         "parameters": parameter_table(idata, posterior.names, HDI_PROB),

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from peano_bayes.errors import PeanoBayesInputError
-from peano_bayes.inference.coordinates import KA, KB, Identity, TensileStretch, sampler_coordinates, stretch
+from peano_bayes.inference.coordinates import KA, KB, Identity, TensileStretch, sampler_coordinates
 from peano_bayes.inference.priors import prior_for
 from peano_bayes.inference.sample import sample
 
@@ -46,7 +46,6 @@ def test_stretches_outside_the_wedge_have_no_density():
         assert log_jacobian[0] == -np.inf
     _, inside = coords.to_theta(np.log([[d1, 10.0 * d1]]))
     assert np.isfinite(inside[0])
-    assert stretch(20.0, 1e3, 0.0) == pytest.approx(0.02)
 
 
 def test_only_a_sampled_pair_is_reparameterized_and_unknown_kinds_are_refused():

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..defaults import COORDINATE_KINDS
+from ..physics.elements import tensile_stretch
 from .priors import Marginal
 
 KA, KB = "tensile_ka_n_per_m", "tensile_kb_n_per_m2"
@@ -44,11 +45,6 @@ class Identity:
         return {"kind": "theta"}
 
 
-def stretch(force_n, ka, kb):
-    """Stretch [m] of ``F = ka d + kb d^2`` at ``force_n`` [N], in the form that stays accurate as kb -> 0."""
-    return 2.0 * force_n / (ka + np.sqrt(ka**2 + 4.0 * kb * force_n))
-
-
 @dataclass(frozen=True)
 class TensileStretch:
     """The series tensile element ``F = ka d + kb d^2`` sampled as the log of its stretch at two forces,
@@ -70,8 +66,8 @@ class TensileStretch:
         (i, j), (m_ka, m_kb) = self.index, self.marginals
         ka, _ = m_ka.from_unconstrained(theta[..., i])
         kb, _ = m_kb.from_unconstrained(theta[..., j])
-        theta[..., i] = np.log(stretch(self.forces[0], ka, kb))
-        theta[..., j] = np.log(stretch(self.forces[1], ka, kb))
+        theta[..., i] = np.log(np.asarray(tensile_stretch(self.forces[0], ka, kb)))
+        theta[..., j] = np.log(np.asarray(tensile_stretch(self.forces[1], ka, kb)))
         return theta
 
     def to_theta(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -121,4 +117,4 @@ def sampler_coordinates(posterior, kind: str = "theta"):
     return TensileStretch((names.index(KA), names.index(KB)), (marginals[KA], marginals[KB]))
 
 
-__all__ = ["COORDINATE_KINDS", "STRETCH_FORCES_N", "Identity", "TensileStretch", "sampler_coordinates", "stretch"]
+__all__ = ["COORDINATE_KINDS", "STRETCH_FORCES_N", "Identity", "TensileStretch", "sampler_coordinates"]
