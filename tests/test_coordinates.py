@@ -10,6 +10,7 @@ from peano_bayes.errors import PeanoBayesInputError
 from peano_bayes.inference.coordinates import KA, KB, Identity, TensileStretch, sampler_coordinates
 from peano_bayes.inference.priors import prior_for
 from peano_bayes.inference.sample import sample
+from tests.test_sample import Gaussian
 
 
 def _coordinates(material: str) -> tuple[TensileStretch, object]:
@@ -56,19 +57,14 @@ def test_only_a_sampled_pair_is_reparameterized_and_unknown_kinds_are_refused():
         sampler_coordinates(ka_only, "stretch")
 
 
-class _GaussianInTheta:
-    """A correlated Gaussian over theta = (u_ka, u_kb, c): the duck type ``sample`` needs."""
+class _GaussianInTheta(Gaussian):
+    """A correlated Gaussian over theta = (u_ka, u_kb, c) centred at ``mean``."""
 
     names = (KA, KB, "c")
-    ndim = 3
+    cov = np.array([[0.04, 0.03, 0.0], [0.03, 0.09, 0.01], [0.0, 0.01, 0.25]])
 
     def __init__(self, mean):
         self.mean = mean
-        self.cov = np.array([[0.04, 0.03, 0.0], [0.03, 0.09, 0.01], [0.0, 0.01, 0.25]])
-
-    def batched(self, thetas):
-        d = thetas - self.mean
-        return -0.5 * np.einsum("ni,ij,nj->n", d, np.linalg.inv(self.cov), d)
 
 
 def test_a_run_in_stretch_coordinates_samples_the_theta_posterior():
