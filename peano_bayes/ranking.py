@@ -139,6 +139,29 @@ def pareto_probability(draws: dict, materials=None, criteria=PARETO_CRITERIA) ->
     return {code: float(np.mean(~dominated[:, j])) for j, code in enumerate(materials)}
 
 
+def ordering_counts(orderings: list[dict]) -> dict[str, int]:
+    """How many relations of ``orderings`` (:func:`ordering_checks` rows) each verdict has: ``agrees``,
+    ``contradicts``, ``undecided``, and ``not informed`` (the metric rests on the prior only)."""
+    counts = dict.fromkeys(("agrees", "contradicts", "undecided", "not informed"), 0)
+    for o in orderings:
+        counts[o["verdict"]] += 1
+    return counts
+
+
+def ordering_summary(orderings: list[dict]) -> str:
+    """One sentence counting the verdicts of :func:`ordering_checks` rows."""
+    c = ordering_counts(orderings)
+    informed = len(orderings) - c["not informed"]
+    text = (
+        f"Of the {informed} relations the fitted tests inform, the posteriors support {c['agrees']} at"
+        f" P >= {AGREEMENT:g}, contradict {c['contradicts']} at P <= {1 - AGREEMENT:.1f}, and leave"
+        f" {c['undecided']} undecided."
+    )
+    if c["not informed"]:
+        text += f" {c['not informed']} more rest on the prior only (their metric was not fitted)."
+    return text
+
+
 def ordering_checks(draws: dict) -> list[dict]:
     """The paper's orderings checked on the posterior: per row of ``published_orderings.csv``, each relation
     whose two materials are in ``draws`` with its probability (P(a > b), or P(|log a/b| <= EQUAL_BAND))."""
@@ -305,6 +328,8 @@ def ranking_markdown(report: dict) -> str:
             "",
             f"Agrees: probability >= {AGREEMENT:g}; contradicts: <= {1 - AGREEMENT:.1f}; undecided between.",
             "",
+            ordering_summary(report["orderings"]),
+            "",
             "| metric | paper's ordering | inferred probability | agree? |",
         ]
         lines.append("|---|---|---|---|")
@@ -328,6 +353,8 @@ __all__ = [
     "PUBLISHED_ORDERINGS",
     "CriterionRanking",
     "ordering_checks",
+    "ordering_counts",
+    "ordering_summary",
     "pareto_probability",
     "rank_criterion",
     "rank_materials",

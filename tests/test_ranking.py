@@ -128,3 +128,32 @@ def test_ranking_says_when_materials_were_tested_at_different_pressures(rng):
     )
     assert "*Compared at a common pressure* (100 kPa). Tested elsewhere: TP at 30 kPa; FC at 200 kPa;" in common
     assert " P at " not in common and "Test pressures differ" not in common  # P was tested at 100 kPa
+
+
+def test_ordering_summary_counts_each_verdict_once(rng):
+    from peano_bayes.ranking import ordering_counts, ordering_summary, ranking_markdown
+
+    # Means at least 30 % apart with 1 % spread: "a > b" agrees exactly when a's mean is larger, and every
+    # "about equal" contradicts; the step metrics marked prior-only are not informed whatever their values say.
+    means = {"TP": 2.0, "P": 1.5, "TFC": 1.0, "PR": 0.7}
+    prior_only = ("speed", "power_per_pressure", "efficiency")
+    report = rank_materials(_draws(rng, means, sd=0.01), from_prior=prior_only)
+    rows = report["orderings"]
+    expected = {"agrees": 0, "contradicts": 0, "undecided": 0, "not informed": 0}
+    for o in rows:
+        if o["metric"] in prior_only:
+            verdict = "not informed"
+        elif o["relation"] == "=":
+            verdict = "contradicts"
+        else:
+            verdict = "agrees" if means[o["a"]] > means[o["b"]] else "contradicts"
+        assert o["verdict"] == verdict, o
+        expected[verdict] += 1
+    assert expected["agrees"] and expected["contradicts"] and expected["not informed"]
+    assert ordering_counts(rows) == expected
+    line = ordering_summary(rows)
+    informed = len(rows) - expected["not informed"]
+    assert line.startswith(f"Of the {informed} relations the fitted tests inform, the posteriors support")
+    assert f"support {expected['agrees']} at" in line and f"contradict {expected['contradicts']} at" in line
+    assert f"{expected['not informed']} more rest on the prior only" in line
+    assert line in ranking_markdown(report)
