@@ -117,10 +117,26 @@ def least_squares(posterior, prior, *, n_starts: int = DEFAULT_STARTS, seed: int
         "n_starts": result.n_starts,
         "n_failed": result.n_failed,
         "n_step_limit": result.n_step_limit,
+        "converged": result.converged,
+        "rounds": result.rounds,
         "start_costs": result.start_costs.tolist(),
         "quality": result.quality,
         "seconds": result.seconds,
     }
+
+
+def least_squares_outcome(fitted: dict) -> str:
+    """One phrase on how the multi-start least squares of :func:`least_squares` ended."""
+    rounds = fitted.get("rounds", 1)
+    best = (
+        f"best start converged in {rounds} round{'s' if rounds > 1 else ''}"
+        if fitted.get("converged", True)
+        else f"best start NOT converged after {rounds} rounds (the posterior mode search polishes it)"
+    )
+    return (
+        f"{best}; of {fitted['n_starts']} starts {fitted['n_failed']} failed and {fitted.get('n_step_limit', 0)}"
+        " stopped at the step limit"
+    )
 
 
 def walker_start(posterior, fitted: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -253,11 +269,7 @@ def infer(
         fitted = least_squares(posterior, prior, n_starts=n_starts, seed=seed)
         write_text(fit_path, json.dumps(fitted, indent=1))
         timings["least_squares_s"] = fitted["seconds"]
-        log(
-            f"{code}: least squares done in {fitted['seconds']:.1f} s "
-            f"({fitted['n_failed']} of {n_starts} starts failed, {fitted.get('n_step_limit', 0)} stopped at the "
-            "step limit)"
-        )
+        log(f"{code}: least squares done in {fitted['seconds']:.1f} s ({least_squares_outcome(fitted)})")
 
     centre, covariance = walker_start(posterior, fitted)
     # Every batch in calls of half an ensemble (what emcee's red-blue moves evaluate): one compilation, which
@@ -358,7 +370,9 @@ def infer(
         "fixed": posterior.fixed,
         "fit_quality_least_squares": fitted["quality"],
         "fit_quality_posterior_mean": quality,
-        "least_squares": {k: fitted.get(k) for k in ("cost", "n_starts", "n_failed", "n_step_limit", "params")},
+        "least_squares": {
+            k: fitted.get(k) for k in ("cost", "n_starts", "n_failed", "n_step_limit", "converged", "rounds", "params")
+        },
         "posterior_mode": None
         if laplace is None
         else {

@@ -25,6 +25,28 @@ def test_multistart_fit_recovers_the_generating_parameters(recovered):
 
 
 @pytest.mark.slow
+def test_least_squares_continues_in_rounds_until_the_best_start_converges(recovered):
+    """Rounds of 10 steps from two starts reach the optimum that the fixture's fit of 80-step rounds found, and
+    say how many rounds that took; with one round of 10 steps the fit says it did not converge."""
+    from peano_bayes.inference.fit import fit
+    from peano_bayes.inference.priors import prior_for
+
+    posterior, _, _, _, fitted = recovered
+    names = list(fitted["names"])
+    prior = prior_for("TP").select(names)
+    kwargs = dict(config=posterior.config, n_starts=2, seed=0, fixed=posterior.fixed, max_steps=10)
+    short = fit(posterior.observations, prior, max_rounds=1, **kwargs)
+    assert not short.converged and short.rounds == 1
+    rounds = fit(posterior.observations, prior, max_rounds=30, **kwargs)
+    assert rounds.converged and 1 < rounds.rounds <= 30
+    assert fitted["converged"]
+    sd = np.sqrt(np.diag(np.asarray(fitted["covariance"])))
+    shift = [abs(np.log(rounds.params[n] / fitted["params"][n])) for n in names]
+    assert np.all(np.asarray(shift) < 1e-2 * sd), dict(zip(names, shift, strict=True))
+    assert rounds.cost == pytest.approx(fitted["cost"], rel=1e-6)
+
+
+@pytest.mark.slow
 def test_fit_residuals_match_the_sensor_noise(recovered):
     """With the driving inputs denoised (likelihood.prepare), the residuals are sensor noise; with the raw
     noisy inputs they were 0.46 N per sample against 0.2 N."""

@@ -1,0 +1,88 @@
+"""Does the multi-start least squares converge? Per dataset: whether the best start met the solver's tolerance
+and in how many rounds, how many starts failed or stopped at the step limit, the cost and the wall time.
+
+The fits are the ones ``peano-bayes fit`` and ``run`` make (:func:`peano_bayes.pipeline.least_squares` on the
+default tests, the bundled prior of the material, 16 starts, seed 0). Datasets: the bundled files
+(``--materials``), and with ``--user-like`` a file such as a user's rig gives: FC's generating values tested at
+1200 kPa (forces to about 230 N, the most this muscle gives), sampled at 10 Hz, two specimens, three repeats, the rig's noise.
+
+    python experiments/bench_least_squares.py [--materials TP PR ...] [--user-like]
+
+The last line printed is one JSON object.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+
+from peano_bayes.bundled import MATERIALS, dataset_path
+from peano_bayes.data import Dataset, load
+from peano_bayes.defaults import DEFAULT_STARTS, DEFAULT_TESTS
+from peano_bayes.inference.likelihood import prepare
+from peano_bayes.inference.posterior import DEFAULT_HELD, build_posterior
+from peano_bayes.materials import material
+from peano_bayes.physics import ModelConfig
+from peano_bayes.pipeline import _prior_of, _select_tests, least_squares
+from peano_bayes.rig import DEFAULT_PROTOCOL, simulate_dataset
+
+USER_LIKE_PRESSURE_PA = 1200e3
+USER_LIKE_RATE_HZ = 10.0
+
+
+def user_like_dataset() -> Dataset:
+    """FC's generating values at 1200 kPa and 10 Hz: a high-force file unlike the bundled ones."""
+    provenance = load(dataset_path("FC")).provenance  # the generating values and model of the bundled file
+    params = json.loads(provenance["parameters"])
+    config = ModelConfig(**json.loads(provenance["config"]))
+    spec = dataclasses.replace(material("FC"), test_pressure_pa=USER_LIKE_PRESSURE_PA)
+    protocol = dataclasses.replace(DEFAULT_PROTOCOL, quasi_static_rate_hz=USER_LIKE_RATE_HZ)
+    return simulate_dataset(spec, params, config=config, tests=DEFAULT_TESTS, protocol=protocol, seed=0)
+
+
+def measure(dataset: Dataset) -> dict:
+    dataset = _select_tests(dataset, DEFAULT_TESTS)
+    whole = _prior_of(dataset, None)
+    prior = whole.for_config(whole.config)
+    observations = prepare(dataset)
+    posterior = build_posterior(observations, prior, config=whole.config, held=DEFAULT_HELD)
+    fitted = least_squares(posterior, prior, n_starts=DEFAULT_STARTS, seed=0)
+    force = max(float(abs(r.force_n).max()) for r in dataset.runs if r.force_n is not None)
+    return {
+        "bins": int(observations.n_bins),
+        "max_force_n": round(force, 1),
+        "converged": fitted["converged"],
+        "rounds": fitted["rounds"],
+        "n_failed": fitted["n_failed"],
+        "n_step_limit": fitted["n_step_limit"],
+        "cost": round(fitted["cost"], 3),
+        "seconds": round(fitted["seconds"], 1),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--materials", nargs="+", default=list(MATERIALS), help="bundled files (default: all)")
+    parser.add_argument("--user-like", action="store_true", help="also the 1200 kPa, 10 Hz file")
+    args = parser.parse_args()
+    rows = {}
+    cases = [(code, lambda code=code: load(dataset_path(code))) for code in args.materials]
+    if args.user_like:
+        cases.append(("FC-1200kPa-10Hz", user_like_dataset))
+    print(f"{'dataset':<16}{'bins':>6}{'max F [N]':>10}{'converged':>10}{'rounds':>7}{'failed':>7}{'limit':>6}"
+          f"{'cost':>12}{'s':>7}", flush=True)
+    for label, make in cases:
+        r = rows[label] = measure(make())
+        print(f"{label:<16}{r['bins']:>6}{r['max_force_n']:>10.1f}{str(r['converged']):>10}{r['rounds']:>7}"
+              f"{r['n_failed']:>7}{r['n_step_limit']:>6}{r['cost']:>12.3f}{r['seconds']:>7.1f}", flush=True)
+    summary = {
+        "datasets": rows,
+        "best_start_converged": sum(r["converged"] for r in rows.values()),
+        "total": len(rows),
+    }
+    print(json.dumps(summary))
+
+
+if __name__ == "__main__":
+    main()
