@@ -4,7 +4,7 @@ and in how many rounds, how many starts failed or stopped at the step limit, the
 The fits are the ones ``peano-bayes fit`` and ``run`` make (:func:`peano_bayes.pipeline.least_squares` on the
 default tests, the bundled prior of the material, 16 starts, seed 0). Datasets: the bundled files
 (``--materials``), and with ``--user-like`` a file such as a user's rig gives: FC's generating values tested at
-1200 kPa (forces to about 230 N, the most this muscle gives), sampled at 10 Hz, two specimens, three repeats, the rig's noise.
+1200 kPa (forces to about 230 N), sampled at 10 Hz, two specimens, three repeats, the rig's noise.
 
     python experiments/bench_least_squares.py [--materials TP PR ...] [--user-like]
 
@@ -16,6 +16,8 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+
+import numpy as np
 
 from peano_bayes.bundled import MATERIALS, dataset_path
 from peano_bayes.data import Dataset, load
@@ -48,7 +50,7 @@ def measure(dataset: Dataset) -> dict:
     observations = prepare(dataset)
     posterior = build_posterior(observations, prior, config=whole.config, held=DEFAULT_HELD)
     fitted = least_squares(posterior, prior, n_starts=DEFAULT_STARTS, seed=0)
-    force = max(float(abs(r.force_n).max()) for r in dataset.runs if r.force_n is not None)
+    force = max(float(np.nanmax(np.abs(r.force_n))) for r in dataset.runs if r.force_n is not None)
     return {
         "bins": int(observations.n_bins),
         "max_force_n": round(force, 1),

@@ -126,16 +126,21 @@ def least_squares(posterior, prior, *, n_starts: int = DEFAULT_STARTS, seed: int
 
 
 def least_squares_outcome(fitted: dict) -> str:
-    """One phrase on how the multi-start least squares of :func:`least_squares` ended."""
+    """One phrase on how the multi-start least squares of :func:`least_squares` ended (a ``fit.json`` written
+    before the rounds were recorded says nothing about the best start)."""
     rounds = fitted.get("rounds", 1)
+    in_rounds = f"{rounds} round{'s' if rounds != 1 else ''}"
+    converged = fitted.get("converged")
     best = (
-        f"best start converged in {rounds} round{'s' if rounds > 1 else ''}"
-        if fitted.get("converged", True)
-        else f"best start NOT converged after {rounds} rounds (the posterior mode search polishes it)"
+        ""
+        if converged is None
+        else f"best start converged in {in_rounds}; "
+        if converged
+        else f"best start NOT converged after {in_rounds}; "
     )
     return (
-        f"{best}; of {fitted['n_starts']} starts {fitted['n_failed']} failed and {fitted.get('n_step_limit', 0)}"
-        " stopped at the step limit"
+        f"{best}of {fitted['n_starts']} starts {fitted['n_failed']} failed and {fitted.get('n_step_limit', 0)}"
+        " stopped unfinished"
     )
 
 

@@ -144,7 +144,10 @@ def ordering_counts(orderings: list[dict]) -> dict[str, int]:
     ``contradicts``, ``undecided``, and ``not informed`` (the metric rests on the prior only)."""
     counts = dict.fromkeys(("agrees", "contradicts", "undecided", "not informed"), 0)
     for o in orderings:
-        counts[o["verdict"]] += 1
+        verdict = o.get("verdict", "undecided")
+        if verdict not in counts:
+            raise ValueError(f"ordering {o.get('a')} {o.get('relation')} {o.get('b')}: unknown verdict {verdict!r}")
+        counts[verdict] += 1
     return counts
 
 

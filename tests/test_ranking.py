@@ -133,9 +133,10 @@ def test_ranking_says_when_materials_were_tested_at_different_pressures(rng):
 def test_ordering_summary_counts_each_verdict_once(rng):
     from peano_bayes.ranking import ordering_counts, ordering_summary, ranking_markdown
 
-    # Means at least 30 % apart with 1 % spread: "a > b" agrees exactly when a's mean is larger, and every
-    # "about equal" contradicts; the step metrics marked prior-only are not informed whatever their values say.
-    means = {"TP": 2.0, "P": 1.5, "TFC": 1.0, "PR": 0.7}
+    # With 1 % spread: "a > b" agrees when a's mean is 30 % larger, contradicts when 30 % smaller and is
+    # undecided when the means are equal (TP and P); "about equal" agrees for equal means, else contradicts.
+    # The step metrics marked prior-only are not informed whatever their values say.
+    means = {"TP": 1.5, "P": 1.5, "TFC": 1.0, "PR": 0.7}
     prior_only = ("speed", "power_per_pressure", "efficiency")
     report = rank_materials(_draws(rng, means, sd=0.01), from_prior=prior_only)
     rows = report["orderings"]
@@ -144,16 +145,19 @@ def test_ordering_summary_counts_each_verdict_once(rng):
         if o["metric"] in prior_only:
             verdict = "not informed"
         elif o["relation"] == "=":
-            verdict = "contradicts"
+            verdict = "agrees" if means[o["a"]] == means[o["b"]] else "contradicts"
+        elif means[o["a"]] == means[o["b"]]:
+            verdict = "undecided"
         else:
             verdict = "agrees" if means[o["a"]] > means[o["b"]] else "contradicts"
         assert o["verdict"] == verdict, o
         expected[verdict] += 1
-    assert expected["agrees"] and expected["contradicts"] and expected["not informed"]
+    assert all(expected.values()), expected
     assert ordering_counts(rows) == expected
     line = ordering_summary(rows)
     informed = len(rows) - expected["not informed"]
     assert line.startswith(f"Of the {informed} relations the fitted tests inform, the posteriors support")
     assert f"support {expected['agrees']} at" in line and f"contradict {expected['contradicts']} at" in line
+    assert f"leave {expected['undecided']} undecided" in line
     assert f"{expected['not informed']} more rest on the prior only" in line
     assert line in ranking_markdown(report)

@@ -67,10 +67,11 @@ class FitResult:
     **Fields:** ``names`` (d,); ``u`` (d,) best point, unconstrained; ``params`` name -> value [SI];
     ``covariance`` (d, d) Laplace covariance in u; ``cost`` half the sum of squared residuals at ``u``;
     ``n_starts``; ``n_failed`` starts that ended non-finite or where the physics solver misses its
-    tolerance; ``n_step_limit`` starts still stopped by ``max_steps`` before the solver's tolerance after the
-    last round (kept: their point is valid, only not polished); ``converged`` whether the best start met the
-    solver's tolerance; ``rounds`` how many rounds of at most ``max_steps`` steps ran;
-    ``start_costs`` (n_starts,) (inf where failed); ``noise`` the weighting noise scales;
+    tolerance, in any round; ``n_step_limit`` starts, not failed, that the solver had not finished in the last
+    round (mostly stopped by ``max_steps``; kept: their point is valid, only not polished); ``converged``
+    whether the best start met the solver's tolerance (``None``: not recorded); ``rounds`` how many rounds of
+    at most ``max_steps`` steps ran;
+    ``start_costs`` (n_starts,) of the last round (inf where failed); ``noise`` the weighting noise scales;
     ``noise_estimate`` noise scales re-estimated from the residuals; ``quality`` per test: RMSE, max |error|
     and R^2 of the observed signal; ``seconds`` wall time (compile included).
     """
@@ -88,7 +89,7 @@ class FitResult:
     noise_estimate: dict
     quality: dict = field(default_factory=dict)
     seconds: float = 0.0
-    converged: bool = True
+    converged: bool | None = None
     rounds: int = 1
 
 
@@ -191,13 +192,14 @@ def fit(
 ) -> FitResult:
     """Levenberg-Marquardt from ``n_starts`` points (the prior median, then prior draws), vmapped, best kept.
 
-    The starts run in rounds of at most ``max_steps`` steps. While the best start has not met the solver's
-    tolerance, another round continues every start from where it stopped (a failed start restarts from the
-    best point), up to ``max_rounds`` rounds: the compiled program is reused, so a round costs its run time
-    only. Each round restarts the damping, so a round must be long enough to get past the first rejected steps
-    (on the test suite's recovery problem, rounds of 6 steps never moved; of 8 steps, three rounds converged). ``prior`` covers the model parameters to fit (see :meth:`Prior.for_config` with
-    ``likelihood=False``); parameters of ``config`` (default ``prior.config``) that it lacks are held at
-    ``fixed`` or their nominal values. ``params`` of the result holds every model parameter.
+    The starts run in rounds of at most ``max_steps`` steps. While the best start so far has not met the
+    solver's tolerance, another round continues every start from where it stopped (a failed start stays
+    failed), up to ``max_rounds`` rounds; the compiled program is reused, so a round costs its run time only.
+    Each round restarts the damping, so a round must be long enough to get past the first rejected steps (on
+    the test suite's recovery problem, rounds of 6 steps never moved; of 8 steps, three rounds converged).
+    ``prior`` covers the model parameters to fit (see :meth:`Prior.for_config` with ``likelihood=False``);
+    parameters of ``config`` (default ``prior.config``) that it lacks are held at ``fixed`` or their nominal
+    values. ``params`` of the result holds every model parameter.
     """
     start_time = time.perf_counter()
     config = prior.config if config is None else config
@@ -220,38 +222,45 @@ def fit(
         jac = jax.jacfwd(fn)(sol.value, groups)
         return sol.value, ok, sol.result == optx.RESULTS.successful, jnp.where(ok, cost, jnp.inf), jac, predictions
 
+    if max_rounds < 1:
+        raise ValueError(f"max_rounds must be >= 1, got {max_rounds!r}")
     starts = np.vstack([np.asarray(prior.median_unconstrained())[None], prior.sample(seed, n_starts - 1)])
     groups = observations.groups
     run = jax.jit(jax.vmap(one, in_axes=(0, None)))
-    for rounds in range(1, max_rounds + 1):
+    failed = np.zeros(n_starts, bool)  # a start that failed in any round stays failed
+    best = None  # (cost, u, jacobian, predictions, converged) of the best start so far, over all rounds
+    rounds = 0
+    while rounds < max_rounds:
+        rounds += 1
         values, ok, converged, costs, jacs, predictions = run(jnp.asarray(starts), groups)
-        costs = np.asarray(costs)
-        best = int(np.argmin(costs))
-        if rounds == 1:  # failures of the starts as drawn (a failed start restarts from the best point)
-            n_failed = int(np.sum(~np.asarray(ok)))
-        if not np.isfinite(costs[best]):
+        values, converged = np.asarray(values), np.asarray(converged)
+        failed |= ~np.asarray(ok)
+        costs = np.where(failed, np.inf, np.asarray(costs))
+        i = int(np.argmin(costs))
+        if np.isfinite(costs[i]) and (best is None or costs[i] <= best[0]):
+            best = (float(costs[i]), values[i], np.asarray(jacs[i]), [np.asarray(q[i]) for q in predictions],
+                    bool(converged[i]))  # fmt: skip
+        if best is None:
             raise RuntimeError(
                 f"all {n_starts} least-squares starts failed (non-finite, or the physics solver missed)"
             )
-        if bool(converged[best]):
+        if best[4] or failed.all():
             break
-        ended = np.asarray(values)
-        starts = np.where(np.isfinite(costs)[:, None], ended, ended[best][None])
-    u = np.asarray(values[best])
-    jac = np.asarray(jacs[best])
+        # Every start that has not failed continues from where it stopped; a failed one reruns its last start.
+        starts = np.where(failed[:, None], starts, values)
+    cost, u, jac, predicted, best_converged = best
     covariance = np.linalg.pinv(jac.T @ jac)
     params = {k: float(v) for k, v in {**fixed, **prior.from_unconstrained(u)}.items()}
-    predicted = [np.asarray(p[best]) for p in predictions]
     return FitResult(
         names=prior.names,
         u=u,
         params=params,
         covariance=covariance,
-        cost=float(costs[best]),
+        cost=cost,
         n_starts=n_starts,
-        n_failed=n_failed,
-        n_step_limit=int(np.sum(np.asarray(ok) & ~np.asarray(converged))),
-        converged=bool(converged[best]),
+        n_failed=int(failed.sum()),
+        n_step_limit=int(np.sum(~failed & ~converged)),
+        converged=best_converged,
         rounds=rounds,
         start_costs=costs,
         noise=noise,
