@@ -461,17 +461,29 @@ def model_table(summaries: list[dict]) -> list[str]:
     return [*lines, "", *(f"{n}\n" for n in notes)]
 
 
+#: A material's figures that ``index.md`` links where they exist, in order: file stem -> what it shows.
+MATERIAL_FIGURES = {
+    "predictive": "data over the predictive band",
+    "response": "force-strain loops per pressure, blocking force and stroke against pressure, with residuals",
+    "step": "step response against the model",
+    "corner": "corner plot",
+    "trace": "trace plot per ensemble",
+    "rank": "rank plot per ensemble",
+}
+
+
 def index_markdown(
     summaries: list[dict],
     metrics: dict | None = None,
     ranking: dict | None = None,
     references: dict | None = None,
-    step_figures: dict | None = None,
+    figures: dict | None = None,
 ) -> str:
     """``results/index.md``: per material, a parameter table with 94 % intervals, fit quality, convergence,
     (given ``references``: code -> reference_models.json) the load-cycle fit against the paper's reference
     models, and (given ``metrics``: code -> metrics.json) the Table 3 metrics against the paper with links to
-    the figures; then (given ``ranking``, :func:`~peano_bayes.ranking.rank_materials`) the cross-material
+    the figures (``figures``: code -> names of :data:`MATERIAL_FIGURES` that exist; default: predictive and
+    corner); then (given ``ranking``, :func:`~peano_bayes.ranking.rank_materials`) the cross-material
     ranking."""
     from .metrics import metrics_markdown
     from .ranking import ranking_markdown
@@ -565,13 +577,13 @@ def index_markdown(
                 "",
                 metrics_markdown(code, m["summary"], m["published"]),
                 "",
-                f"Figures: [data over the predictive band]({code}/figures/predictive.png), "
-                f"[corner plot]({code}/figures/corner.png)"
-                + (
-                    f", [step response against the model]({code}/figures/step.png)."
-                    if (step_figures or {}).get(code)
-                    else "."
-                ),
+                "Figures: "
+                + ", ".join(
+                    f"[{what}]({code}/figures/{name}.png)"
+                    for name, what in MATERIAL_FIGURES.items()
+                    if name in (figures or {}).get(code, ("predictive", "corner"))
+                )
+                + ".",
                 "",
             ]
     if ranking and ranking.get("criteria"):
@@ -649,8 +661,8 @@ def report_results(out_dir: str | Path, materials=BUNDLED_MATERIALS, *, n_draws:
         write_text(out_dir / "ranking.json", json.dumps(ranking, indent=1))
         write_text(out_dir / "ranking.md", "# Ranking\n\n" + ranking_markdown(ranking) + "\n")
         cross_material_figures(out_dir, results, metrics, ranking)
-    steps = {c: (out_dir / c / "figures" / "step.png").exists() for c in finished}
-    write_text(out_dir / "index.md", index_markdown(summaries, metrics, ranking, references, steps))
+    figures = {c: [n for n in MATERIAL_FIGURES if (out_dir / c / "figures" / f"{n}.png").exists()] for c in finished}
+    write_text(out_dir / "index.md", index_markdown(summaries, metrics, ranking, references, figures))
     log(f"wrote {out_dir / 'index.md'}")
     return ranking or {}
 

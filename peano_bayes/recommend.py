@@ -455,11 +455,17 @@ def explain(candidate: dict, requirement: Requirement) -> str:
     if c["infeasible"]:
         return f"{design} is infeasible: {'; '.join(c['infeasible'])}; it would give {force}."
     binding = c["binding"]
-    return (
+    text = (
         f"{design} meets every requirement with probability {c['probability']:.2f}, with {force}; "
         f"the binding requirement is {binding} (P = {c['p_each'][binding]:.2f}, median margin "
         f"{100 * c['margin'][binding]:+.0f} %)."
     )
+    if c["probability"] < 0.5:
+        text += (
+            f" No candidate of the grid is likely to meet the requirement: relax {binding} or widen the grid"
+            " (other materials, geometries or a higher pressure where a material allows it)."
+        )
+    return text
 
 
 def recommend(
