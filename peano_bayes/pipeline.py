@@ -461,6 +461,15 @@ def model_table(summaries: list[dict]) -> list[str]:
     return [*lines, "", *(f"{n}\n" for n in notes)]
 
 
+def _shown_path(path: str) -> str:
+    """A dataset path as a reader of ``index.md`` can use it: a bundled file by its place in the package
+    (``peano_bayes/bundled/data/TP.csv``), not the absolute path of the machine that ran the job."""
+    try:
+        return str(Path("peano_bayes/bundled/data") / Path(path).resolve().relative_to(bundled.DATA_DIR.resolve()))
+    except ValueError:
+        return path
+
+
 #: A material's figures that ``index.md`` links where they exist, in order: file stem -> what it shows.
 MATERIAL_FIGURES = {
     "predictive": "data over the predictive band",
@@ -497,7 +506,7 @@ def index_markdown(
         lines += [
             f"## {s['material']}",
             "",
-            f"Data: `{s['dataset']}` ({', '.join(s['tests'])}); {s.get('n_ensembles', 1)} ensembles of "
+            f"Data: `{_shown_path(s['dataset'])}` ({', '.join(s['tests'])}); {s.get('n_ensembles', 1)} ensembles of "
             f"{s['n_walkers']} walkers x {s['steps']} steps; "
             f"{verdict}. Max R-hat {max(conv['rhat'].values()):.3f}, "
             f"min bulk ESS {min(conv['ess_bulk'].values()):.0f}, "

@@ -74,3 +74,13 @@ def test_a_ridge_is_named_with_the_combination_the_data_determine():
     page = index_markdown([{**_summary(0.9), "ridges": ridges}])
     assert "- a and b: correlation -1.00; a × b^2.00 is determined to ±0.2 % (1 sd), each alone to ±10 %" in page
     assert "Ridges" not in index_markdown([_summary(0.9)])
+
+
+def test_the_results_page_names_a_bundled_dataset_by_its_place_in_the_package():
+    from peano_bayes.bundled import dataset_path
+
+    bundled = index_markdown([{**_summary(0.9), "dataset": str(dataset_path("TP"))}])
+    assert "Data: `peano_bayes/bundled/data/TP.csv`" in bundled
+    assert str(dataset_path("TP").parent) not in bundled  # not the absolute path of the machine
+    own = index_markdown([{**_summary(0.9), "dataset": "/data/rig/my.csv"}])
+    assert "Data: `/data/rig/my.csv`" in own
