@@ -157,6 +157,17 @@ def _failed(key: str, err: BaseException) -> Outcome:
     )
 
 
+def _settle_arviz_stamp() -> None:
+    """Import arviz once here before worker processes start. On its first import of a day arviz 0.23 writes a
+    stamp file in the user's cache through one fixed temporary name, so workers importing it at the same moment
+    race, and the loser dies with FileNotFoundError (seen with two test workers just after midnight)."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FutureWarning)
+        import arviz  # noqa: F401
+
+
 def run_units(
     units: Sequence[Unit],
     executor: cf.Executor | None = None,
@@ -337,6 +348,7 @@ def make_executor(scheduler: str | None = None, jobs: int = 1) -> Iterator[tuple
         if jobs == 1:
             yield None, ExecutorInfo("serial", 1)
             return
+        _settle_arviz_stamp()
         ctx = multiprocessing.get_context("spawn")
         with cf.ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
             yield pool, ExecutorInfo("processes", jobs)

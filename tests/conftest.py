@@ -20,6 +20,11 @@ settings.load_profile("deterministic")
 
 warnings.filterwarnings("ignore", category=FutureWarning, module="arviz")
 
+# arviz 0.23 writes a daily stamp file through one fixed temporary name on its first import of the day: two
+# xdist workers importing it at once race and one dies (FileNotFoundError). The controller loads this file
+# before it starts the workers, so importing arviz here settles the stamp first.
+import arviz  # noqa: E402, F401
+
 
 @pytest.fixture
 def rng():
