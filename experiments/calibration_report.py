@@ -132,20 +132,13 @@ def _free_strain_reached(dataset, out: dict, strokes) -> dict:
 
 
 def _energy_definitions(dataset) -> dict:
-    """Energy per MPa of the relaxing branch under two readings of Table 3's definition [J/MPa]:
-    from zero strain (``run_metrics``), and from the most stretched point of the cycle, both to the extrapolated
-    free strain."""
+    """Energy per MPa of the relaxing branch read from the most stretched point of the cycle instead of zero
+    strain (``run_metrics``), to the extrapolated free strain [J/MPa]."""
     l0 = dataset.geometry.flat_length_m
-    from_stretch = []
-    for run in _pressurized_cycles(dataset):
-        _, (s_down, f_down) = table3._branches(run.strain, run.force_n)
-        order = np.argsort(s_down)
-        s, f = s_down[order], f_down[order]
-        work = float(np.trapezoid(f, s))
-        free = table3.free_strain(run.strain, run.force_n)
-        if free > s[-1]:
-            work += 0.5 * f[-1] * (free - s[-1])
-        from_stretch.append(work * l0 / (np.median(run.pressure_pa) / table3.PA_PER_MPA))
+    from_stretch = [
+        table3.energy_per_pressure(run.strain, run.force_n, run.pressure_pa, l0, from_strain=None)
+        for run in _pressurized_cycles(dataset)
+    ]
     return {"_energy_from_stretch": float(np.mean(from_stretch))}
 
 

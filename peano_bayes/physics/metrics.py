@@ -63,16 +63,18 @@ def free_strain(strain, force_n, fit_fraction: float = 0.2) -> float:
     return float(-intercept / slope) if slope < 0 else float(s_down.max())
 
 
-def energy_per_pressure(strain, force_n, pressure_pa, flat_length_m) -> float:
-    """Work output contracting quasi-statically from zero strain to the free strain, per MPa [J/MPa].
+def energy_per_pressure(strain, force_n, pressure_pa, flat_length_m, from_strain: float | None = 0.0) -> float:
+    """Work output contracting quasi-statically from ``from_strain`` to the free strain, per MPa [J/MPa].
 
-    Integrates the relaxing curve from strain 0 to its end, then the linear extrapolation to the free strain.
+    Integrates the relaxing curve from ``from_strain`` (default 0, the unstretched length; ``None``: the
+    cycle's most stretched point) to its end, then the linear extrapolation to the free strain.
     """
     _, (s_down, f_down) = _branches(strain, force_n)
     s, f = _sorted(s_down, f_down)
     eps_free = free_strain(strain, force_n)
-    inside = s >= 0.0
-    grid = np.concatenate([[0.0], s[inside]]) if s.min() < 0 else s[inside]
+    start = s.min() if from_strain is None else from_strain
+    inside = s >= start
+    grid = np.concatenate([[start], s[inside]]) if s.min() < start else s[inside]
     force = np.interp(grid, s, f)
     work = np.trapezoid(force, grid)
     if eps_free > grid[-1]:
