@@ -136,7 +136,9 @@ def response_runs(idata) -> list[dict]:
         title = panel["title"]
         if panel["test"] == "load_cycle":
             pressure_kpa = float(np.median(np.asarray(obs["pressure_pa"].values)[mask])) / 1e3
-            title = f"load cycle at {pressure_kpa:.0f} kPa: specimen {specimen}, run {run}"
+            title = f"load cycle at {round(pressure_kpa):d} kPa\nspecimen {specimen}, run {run}"
+        else:
+            title = title.replace(": ", "\n", 1)
         out.append({**panel, "x": x, "xlabel": xlabel, "title": title})
     return out
 
@@ -227,8 +229,8 @@ def material_figures(result_dir: str | Path, dataset=None) -> list[Path]:
         responses = response_runs(idata)
         if responses:
             fig, axes = plt.subplots(
-                2, len(responses), figsize=(3.2 * len(responses), 3.9), squeeze=False,
-                gridspec_kw={"height_ratios": (2.4, 1.0)}, sharex="col",
+                2, len(responses), figsize=(3.4 * len(responses), 4.4), squeeze=False,
+                gridspec_kw={"height_ratios": (2.4, 1.0)}, sharex="col", layout="constrained",
             )
             for top, bottom, p in zip(axes[0], axes[1], responses, strict=True):
                 plots.response_with_residuals(
@@ -236,8 +238,8 @@ def material_figures(result_dir: str | Path, dataset=None) -> list[Path]:
                     xlabel=p["xlabel"], ylabel=SIGNAL_LABEL[p["test"]], title=p["title"],
                 )
             handles, labels = axes[0][0].get_legend_handles_labels()
-            fig.legend(handles, labels, loc="lower center", ncol=3, bbox_to_anchor=(0.5, -0.08), frameon=False)
-            fig.suptitle(f"{code}: responses against their driving input, 94 % posterior predictive", y=1.0)
+            fig.legend(handles, labels, loc="outside lower center", ncol=3, frameon=False)
+            fig.suptitle(f"{code}: responses against their driving input, 94 % posterior predictive")
             written += save(fig, result_dir / "figures" / "response")
         names = physical_names(idata)
         axes = az.plot_pair(

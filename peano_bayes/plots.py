@@ -184,7 +184,10 @@ def response_with_residuals(
     ax.set_ylabel(ylabel)
     ax.tick_params(labelbottom=False)
     ax_residual.set_xlabel(xlabel)
-    ax_residual.set_ylabel("data - median")
+    unit = ylabel[ylabel.find("[") :] if "[" in ylabel else ""
+    ax_residual.set_ylabel(f"residual {unit}".strip())
+    ax_residual.yaxis.set_major_locator(matplotlib.ticker.MaxNLocator(3))
+    ax_residual.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(4))
     if title:
         ax.set_title(title)
 

@@ -133,7 +133,7 @@ def test_response_with_residuals_bands_a_loop_branch_by_branch_and_draws_what_it
 def test_response_runs_are_load_cycles_against_strain_at_each_pressure(result_dir):
     panels = response_runs(load_result(result_dir))
     assert [p["xlabel"] for p in panels] == ["strain [-]", "strain [-]"]
-    assert [p["title"].split(":")[0] for p in panels] == ["load cycle at 0 kPa", "load cycle at 30 kPa"]
+    assert [p["title"].splitlines()[0] for p in panels] == ["load cycle at 0 kPa", "load cycle at 30 kPa"]
     for p in panels:
         assert p["x"].shape == p["observed"].shape
         assert len(plots._monotone_pieces(p["x"])) == 2  # stretched, then released: one loop
