@@ -153,6 +153,7 @@ def _take(group: RunGroup, rows: np.ndarray, cycle: np.ndarray) -> RunGroup:
         counts=pick(group.counts),
         shared=np.arange(len(rows)),
         bin_time_s=pick(group.bin_time_s),
+        bin_nodes=pick(group.bin_nodes),
     )
 
 
@@ -161,7 +162,6 @@ def _covariates(groups, cycles, session_start: dict) -> Covariates:
     block_id = 0
     for group, cycle in zip(groups, cycles, strict=True):
         r, m = group.observed.shape
-        p = group.points_per_bin
         for i in range(r):
             key = group.keys[i]
             cols["test"].append(np.full(m, group.test))
@@ -171,15 +171,15 @@ def _covariates(groups, cycles, session_start: dict) -> Covariates:
             cols["block"].append(block_id + blocks)
             block_id += int(blocks[-1]) + 1
             source = group.supply_pa if group.test == "step" else group.pressure_pa
-            cols["pressure_pa"].append(np.asarray(source[i]).reshape(m, p).mean(axis=1))
-            strain_in = np.asarray(group.strain[i]).reshape(m, p).mean(axis=1)
+            cols["pressure_pa"].append(group.per_bin(np.asarray(source[i]), row=i).mean(axis=1))
+            strain_in = group.per_bin(np.asarray(group.strain[i]), row=i).mean(axis=1)
             observed_strain = OBSERVED[group.test][0] == "strain"
             cols["strain"].append(np.asarray(group.observed[i]) if observed_strain else strain_in)
             rate = np.sign(np.gradient(strain_in)) if group.test == "load_cycle" else np.zeros(m)
             cols["rate_sign"].append(rate)
             t = np.asarray(group.bin_time_s[i])
             if group.test == "step":
-                supply = np.asarray(group.supply_pa[i]).reshape(m, p).mean(axis=1)
+                supply = group.per_bin(np.asarray(group.supply_pa[i]), row=i).mean(axis=1)
                 edge = t[int(np.argmax(np.abs(np.diff(supply)))) + 1] if m > 1 else t[0]
                 cols["time_since_step_s"].append(t - edge)
             else:

@@ -281,8 +281,7 @@ class Posterior:
         for g in self.observations.groups:
             ok = np.isfinite(g.observed)
             time_s = g.bin_time_s[g.shared]
-            m = g.observed.shape[1]
-            per_bin = lambda x, g=g, m=m: np.asarray(x)[g.shared].reshape(len(g.shared), m, -1).mean(axis=-1)  # noqa: E731
+            per_bin = lambda x, g=g: g.per_bin(np.asarray(x)).mean(axis=-1)[g.shared]  # noqa: E731
             strain, pressure = per_bin(g.strain), per_bin(g.pressure_pa)
             for r, key in enumerate(g.keys):
                 n = int(ok[r].sum())

@@ -41,9 +41,8 @@ def load_cycle_bins(observations: Observations) -> dict[str, np.ndarray]:
     for group in observations.groups:
         if group.test != "load_cycle":
             continue
-        u, m = group.bin_time_s.shape
-        strain = np.asarray(group.strain).reshape(u, m, -1).mean(axis=-1)[group.shared]
-        pressure = np.asarray(group.pressure_pa).reshape(u, m, -1).mean(axis=-1)[group.shared]
+        strain = group.per_bin(np.asarray(group.strain)).mean(axis=-1)[group.shared]
+        pressure = group.per_bin(np.asarray(group.pressure_pa)).mean(axis=-1)[group.shared]
         rising = np.gradient(strain, axis=1) > 0
         ok = np.isfinite(group.observed)
         cols["pressure_pa"].append(pressure[ok])
