@@ -18,7 +18,10 @@ file costs what a 10 Hz file costs); no bin straddles a reversal. ``bin_sizes`` 
 samples (discovery uses this). The simulation runs at two points per
 bin (:func:`quadrature_times`) and their mean is compared with the bin mean: exact for any signal cubic in time
 within a bin. (Simulating once at the bin's mean input instead biased a stiffness by 1.5 %, several posterior
-sd, on virtual-rig data.) The step response is not binned by default (its dynamics need every sample).
+sd, on virtual-rig data.) The friction state remembers the path, so the simulation also passes through the run's
+first sample and, with segment bins, both samples of each turn of the inputs (:func:`with_path_samples`); their
+predictions are not compared with data. The step response is not binned by default (its dynamics need every
+sample).
 
 **Driving inputs (errors in variables):** before binning, the measured inputs that drive a simulation
 (:data:`DRIVING_INPUTS`) are replaced by their piecewise-linear least-squares fit (ramps, holds and steps, see
@@ -848,5 +851,6 @@ __all__ = [
     "sample_times",
     "segment_bins",
     "segment_starts",
+    "with_path_samples",
     "whitened_residuals",
 ]
