@@ -26,7 +26,7 @@ from peano_bayes.inference.likelihood import prepare
 from peano_bayes.inference.posterior import DEFAULT_HELD, build_posterior
 from peano_bayes.materials import material
 from peano_bayes.physics import ModelConfig
-from peano_bayes.pipeline import _prior_of, _select_tests, least_squares
+from peano_bayes.pipeline import least_squares, prior_of, select_tests
 from peano_bayes.rig import DEFAULT_PROTOCOL, simulate_dataset
 
 USER_LIKE_PRESSURE_PA = 1200e3
@@ -44,8 +44,8 @@ def user_like_dataset() -> Dataset:
 
 
 def measure(dataset: Dataset) -> dict:
-    dataset = _select_tests(dataset, DEFAULT_TESTS)
-    whole = _prior_of(dataset, None)
+    dataset = select_tests(dataset, DEFAULT_TESTS)
+    whole = prior_of(dataset, None)
     prior = whole.for_config(whole.config)
     observations = prepare(dataset)
     posterior = build_posterior(observations, prior, config=whole.config, held=DEFAULT_HELD)

@@ -54,7 +54,9 @@ BUNDLED_MATERIALS = bundled.MATERIALS
 WEAKLY_INFORMED = 0.5
 
 
-def _select_tests(dataset: Dataset, tests) -> Dataset:
+def select_tests(dataset: Dataset, tests) -> Dataset:
+    """``dataset`` with the runs of ``tests`` (names of :data:`ALL_TESTS`) only; an unknown name, or no run
+    left, is a :class:`~peano_bayes.errors.PeanoBayesInputError` naming the file and what it holds."""
     tests = tuple(tests)
     unknown = [t for t in tests if t not in ALL_TESTS]
     if unknown:
@@ -67,7 +69,7 @@ def _select_tests(dataset: Dataset, tests) -> Dataset:
     return dataclasses.replace(dataset, runs=runs)
 
 
-def _prior_of(dataset: Dataset, prior: str | Path | None):
+def prior_of(dataset: Dataset, prior: str | Path | None):
     """The whole prior of a fit (every parameter; :meth:`~peano_bayes.inference.priors.Prior.for_config`
     selects a model's): ``prior`` (file or code) if given, else the bundled prior of the material code."""
     if prior is not None:
@@ -246,9 +248,9 @@ def infer(
     """
     timings = {}
     dataset = load(data) if not isinstance(data, Dataset) else data
-    dataset = _select_tests(dataset, tests)
+    dataset = select_tests(dataset, tests)
     code = dataset.material.code
-    whole_prior = _prior_of(dataset, prior)
+    whole_prior = prior_of(dataset, prior)
     out = Path(out_dir) / _check_label(_default_label(dataset) if label is None else label)
     choice = _model_choice(dataset, whole_prior.config, out, discover=discover, resume=resume, seed=seed, log=log)
     config = choice.config
@@ -627,7 +629,7 @@ def reference_models(directory: Path, summary: dict, *, log=print) -> dict | Non
     if "load_cycle" not in summary["tests"] or not source.exists():
         return None
     log(f"{summary['material']}: fitting the reference models to the load cycles ...")
-    comparison = reference_comparison(prepare(_select_tests(load(source), ["load_cycle"])))
+    comparison = reference_comparison(prepare(select_tests(load(source), ["load_cycle"])))
     write_text(path, json.dumps(comparison, indent=1))
     return comparison
 
@@ -830,8 +832,10 @@ __all__ = [
     "index_markdown",
     "infer",
     "least_squares",
+    "prior_of",
     "reference_models",
     "report_results",
     "run_bundled",
+    "select_tests",
     "walker_start",
 ]
