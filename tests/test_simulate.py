@@ -1,7 +1,5 @@
 """The four rig tests: limits, invariants over the parameter box, vmap, and gradients vs finite differences."""
 
-import json
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -10,8 +8,6 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from peano_bayes.bundled import dataset_path
-from peano_bayes.data import load
 from peano_bayes.physics import (
     DEFAULT_CONFIG,
     ELASTIC_CONFIG,
@@ -388,23 +384,3 @@ def test_a_mount_on_a_linear_film_is_the_film_at_the_series_stiffness(ka_n_per_m
         # tolerance, so there "equal" means a thousand times below the rig's strain noise (2e-4).
         atol = 2e-7 if name == "step" else 1e-9 * float(jnp.max(jnp.abs(film)))
         np.testing.assert_allclose(np.asarray(mount), np.asarray(film), rtol=0, atol=atol, err_msg=name)
-
-
-def test_pressure_loaded_friction_converges_in_the_time_step():
-    """Blocking with the bundled PC specimen A (friction limit 9.6 N + 0.4 x the active force, which grows along
-    every step of the ramp): at the rig's 20 Hz and at 10 Hz the force stays within 0.003 N of a 200 Hz
-    simulation. With the step's end limit alone (first order) it was 0.031 and 0.064 N off."""
-    bundled = load(dataset_path("PC"))
-    config = ModelConfig(**json.loads(bundled.provenance["config"]))
-    truth = json.loads(bundled.provenance["specimen_parameters"])["A"]
-    params = {k: jnp.asarray(v) for k, v in {**config.nominal_parameters(), **truth}.items()}
-
-    def force(rate_hz):
-        t = np.linspace(0.0, 20.0, int(20 * rate_hz) + 1)
-        result = simulate_blocking(params, Blocking(jnp.asarray(t), jnp.asarray(200e3 * t / 20.0)), config=config)
-        return t, np.asarray(result.force_n)
-
-    t_ref, f_ref = force(200)
-    for rate in (10, 20):
-        t, f = force(rate)
-        assert np.max(np.abs(f - np.interp(t, t_ref, f_ref))) < 0.003, rate
