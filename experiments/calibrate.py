@@ -151,12 +151,15 @@ def model_metrics(code: str, params: dict) -> dict[str, float]:
     return table3.model_metrics(code, params, config=config, quirks=quirks)
 
 
-def residuals(code: str, params: dict, fitted: dict[str, dict], targets) -> np.ndarray:
-    """Residual vector of one material: targets, active orderings and the weak prior (all dimensionless)."""
-    try:
-        values = model_metrics(code, params)
-    except RigSimulationError:
-        values = {}
+def residuals(code: str, params: dict, fitted: dict[str, dict], targets, values: dict | None = None) -> np.ndarray:
+    """Residual vector of one material: targets, active orderings and the weak prior (all dimensionless).
+    ``values``: the material's :func:`model_metrics` at ``params`` if already computed (``{}`` where the
+    simulation failed)."""
+    if values is None:
+        try:
+            values = model_metrics(code, params)
+        except RigSimulationError:
+            values = {}
     out = []
     for metric, target, tol in targets.get(code, []):
         v = values.get(metric, float("nan"))

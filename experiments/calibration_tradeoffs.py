@@ -30,6 +30,8 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import least_squares
 
+from peano_bayes.rig import RigSimulationError
+
 sys.path.insert(0, str(Path(__file__).parent))
 from calibrate import (  # noqa: E402
     CACHE,
@@ -134,12 +136,13 @@ def probe(code: str, check: tuple, others: dict, targets) -> dict:
 
     def fun(x):
         params = dict(zip(names, np.exp(x), strict=True))
-        base = residuals(code, params, fitted, targets)
         try:
-            extra = WEIGHT * hinge(model_metrics(code, params))
-        except Exception:  # a failed simulation: the calibration's own residual already says 30
-            extra = 30.0
-        return np.append(base, extra)
+            values = model_metrics(code, params)
+        except RigSimulationError:
+            values = {}
+        # A failed simulation: the calibration's own residuals say 30, and so does the forcing term.
+        extra = WEIGHT * hinge(values) if values else 30.0
+        return np.append(residuals(code, params, fitted, targets, values=values), extra)
 
     tic = time.perf_counter()
     result = least_squares(fun, x0, bounds=(lo, hi), method="trf", diff_step=1e-2, max_nfev=MAX_NFEV)

@@ -159,9 +159,9 @@ class RunGroup:
     counts: np.ndarray
     shared: np.ndarray
     bin_time_s: np.ndarray
+    bin_nodes: np.ndarray
     strain_error: np.ndarray | None = None
     pressure_error: np.ndarray | None = None
-    bin_nodes: np.ndarray | None = None
 
     @property
     def has_input_error(self) -> bool:
@@ -178,10 +178,8 @@ class RunGroup:
         """Simulated-point values as (..., m, p), one row per bin: ``values`` (u, L) of every simulated row, or
         with ``row`` (L,) of that row. NumPy or JAX arrays."""
         index = self.bin_nodes if row is None else self.bin_nodes[row]
-        if isinstance(values, np.ndarray):
-            picked = np.take_along_axis(values, np.broadcast_to(index, values.shape[:-1] + index.shape[-1:]), -1)
-        else:
-            picked = jnp.take_along_axis(values, jnp.broadcast_to(index, values.shape[:-1] + index.shape[-1:]), -1)
+        xp = np if isinstance(values, np.ndarray) else jnp
+        picked = xp.take_along_axis(values, xp.broadcast_to(index, values.shape[:-1] + index.shape[-1:]), -1)
         return picked.reshape(picked.shape[:-1] + (self.observed.shape[1], self.points_per_bin))
 
     @property
