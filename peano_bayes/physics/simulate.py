@@ -39,6 +39,10 @@ QUASI_STATIC_ITERATIONS = 3
 #: Newton corrections per step-test substep after its bisection (see :data:`_DYNAMIC_BRACKET_ATOL`).
 DYNAMIC_ITERATIONS = 3
 COLD_START_ITERATIONS = 4
+#: A Newton step shorter than this (in log theta) ends the loop once the minimum number of steps is taken; the
+#: safeguarded steps stop at the latest after _NEWTON_MAX_STEPS (a bracket of 1e-3 bisected to round-off).
+_NEWTON_XTOL = 1e-10
+_NEWTON_MAX_STEPS = 48
 _BISECTION_MAX_STEPS = 256
 _BRACKET_ATOL = 1e-3
 _LOCAL_HALF_WIDTH = 0.01
@@ -117,15 +121,33 @@ class StepResult(NamedTuple):
 # --- the scalar solve ---------------------------------------------------------------------------------------
 
 
-def _newton_steps(fn, z, iterations: int):
-    """``iterations`` Newton steps on ``fn(z) = 0``, clipped to the admissible range (a loop, not unrolled: each
-    copy of the residual in a scan's body is traced, differentiated and compiled again)."""
+def _newton_steps(fn, z, iterations: int, lo, hi, increasing: bool):
+    """Safeguarded Newton on ``fn(z) = 0`` inside the bracket ``[lo, hi]`` that holds the root: at least
+    ``iterations`` steps, then more (up to :data:`_NEWTON_MAX_STEPS`) while the last step was longer than
+    :data:`_NEWTON_XTOL`. Each evaluation narrows the bracket by the residual's sign, and a Newton step that
+    would leave it is replaced by the bracket's midpoint. Where the residual is smooth on the bracket's scale the
+    steps are plain Newton steps and stop after ``iterations``; where it is nearly a step (stiff friction at rest:
+    its force changes over the sub-micrometre Dahl length), plain Newton overshoots and stops far from the root
+    (0.9 N of force imbalance in a stroke test, against its 0.01 N tolerance), and the bracket then bisects.
+    A loop, not unrolled: each copy of the residual in a scan's body is traced, differentiated and compiled
+    again. ``increasing`` says whether the residual rises with ``z``."""
 
-    def newton(_, z):
+    def unfinished(carry):
+        _, _, _, step, k = carry
+        return (k < iterations) | ((jnp.abs(step) > _NEWTON_XTOL) & (k < _NEWTON_MAX_STEPS))
+
+    def newton(carry):
+        z, lo, hi, _, k = carry
         r, dr = jax.jvp(fn, (z,), (jnp.ones_like(z),))
-        return jnp.clip(z - r / dr, *_LOG_THETA)
+        root_above = (r < 0.0) == increasing
+        lo, hi = jnp.where(root_above, jnp.maximum(lo, z), lo), jnp.where(root_above, hi, jnp.minimum(hi, z))
+        candidate = z - r / dr
+        inside = jnp.isfinite(candidate) & (candidate >= lo) & (candidate <= hi)
+        new = jnp.clip(jnp.where(inside, candidate, 0.5 * (lo + hi)), *_LOG_THETA)
+        return new, lo, hi, new - z, k + 1
 
-    return jax.lax.fori_loop(0, iterations, newton, z)
+    start = (z, jnp.minimum(lo, z), jnp.maximum(hi, z), jnp.asarray(jnp.inf, dtype=jnp.result_type(z)), 0)
+    return jax.lax.while_loop(unfinished, newton, start)[0]
 
 
 def _bisection(residual, atol: float, increasing: bool, lower=_LOG_THETA[0], upper=_LOG_THETA[1]):
@@ -171,6 +193,7 @@ def _solve_log_theta(
     """
     if z_prev is None:
         z_guess = _bisection(residual, atol, increasing)
+        lo, hi = z_guess - atol, z_guess + atol
     else:
         z_prev = jax.lax.stop_gradient(z_prev)
         near_lo = jnp.clip(z_prev - _LOCAL_HALF_WIDTH, *_LOG_THETA)
@@ -190,7 +213,8 @@ def _solve_log_theta(
 
         lo, hi = jax.lax.fori_loop(0, math.ceil(math.log2(2.0 * _LOCAL_HALF_WIDTH / atol)), halve, (lo, hi))
         z_guess = 0.5 * (lo + hi)
-    solve = lambda fn, z: _newton_steps(fn, z, iterations)  # noqa: E731
+    lo, hi = jax.lax.stop_gradient(lo), jax.lax.stop_gradient(hi)
+    solve = lambda fn, z: _newton_steps(fn, z, iterations, lo, hi, increasing)  # noqa: E731
     return jax.lax.custom_root(residual, jax.lax.stop_gradient(z_guess), solve, lambda g, y: y / g(1.0))
 
 
