@@ -221,13 +221,14 @@ class MuscleState(NamedTuple):
     kelvin_m: jnp.ndarray
     creep_m: jnp.ndarray
     friction_n: jnp.ndarray
+    friction_limit_n: jnp.ndarray  # the parallel friction element's limit at the end of the last step
 
 
 def initial_state(config: ModelConfig) -> MuscleState:
     """A relaxed state: no internal forces or stretches."""
     zero = jnp.zeros(())
     return MuscleState(
-        zero, zero, zero, jnp.zeros(config.parallel_maxwell), jnp.zeros(config.series_kelvin), zero, zero
+        zero, zero, zero, jnp.zeros(config.parallel_maxwell), jnp.zeros(config.series_kelvin), zero, zero, zero
     )
 
 
@@ -297,7 +298,12 @@ def chain(
     friction = state.friction_n
     if config.friction == "parallel":
         limit = params["friction_force_n"] + params["friction_pressure_fraction"] * active
-        friction = elements.dahl_update(state.friction_n, dx, params["friction_stiffness_n_per_m"], limit)
+        # The limit changes along the step with the pressure load; the Dahl update is exact for a constant
+        # one, and taking the mean of the step's two ends keeps it second order in the step.
+        previous = limit if relaxed else state.friction_limit_n
+        friction = elements.dahl_update(
+            state.friction_n, dx, params["friction_stiffness_n_per_m"], 0.5 * (previous + limit)
+        )
         force = force - friction
 
     stretch = jnp.zeros_like(force)
@@ -326,6 +332,7 @@ def chain(
         kelvin_m=kelvin,
         creep_m=creep,
         friction_n=friction if config.friction == "parallel" else state.friction_n,
+        friction_limit_n=limit if config.friction == "parallel" else state.friction_limit_n,
     )
     return Chain(force, x - stretch, friction_limit, new_state)
 
@@ -343,6 +350,7 @@ def total_force(strain, link: Chain, params, config: ModelConfig, geometry: Geom
             strain, params["extension_k_n_per_m"], params["extension_rate"], l0
         )
     if config.friction == "whole":
+        # First order in the step: this limit follows the chain force, which the state does not carry.
         limit = params["friction_force_n"] + params["friction_pressure_fraction"] * jnp.abs(link.force_n)
         dy = (strain - state.strain) * l0  # friction opposes the motion of the load
         friction = elements.dahl_update(state.friction_n, dy, params["friction_stiffness_n_per_m"], limit)
