@@ -372,6 +372,14 @@ def _snap(segments: np.ndarray, known: list, n: int) -> np.ndarray:
     return segments
 
 
+def _interp_columns(time_s: np.ndarray, sample_time_s: np.ndarray, columns: np.ndarray) -> np.ndarray:
+    """Each column of ``columns`` (n, q), sampled at ``sample_time_s`` (n,), at ``time_s`` (L,): (L, q). A
+    noise-free input has no error columns (q = 0)."""
+    if columns.shape[1] == 0:
+        return np.zeros((len(time_s), 0))
+    return np.stack([np.interp(time_s, sample_time_s, c) for c in columns.T], axis=-1)
+
+
 def _reduce_run(
     run,
     k: int | None,
@@ -431,8 +439,7 @@ def _reduce_run(
     out["load_n"] = float(np.nanmedian(run.load_n)) if has_load else None
     out["input_sd"] = input_sd
     out["error_basis"] = {
-        name: b if one_per_bin else np.stack([np.interp(sim_time, run.time_s, c) for c in b.T], axis=-1)
-        for name, b in basis.items()
+        name: b if one_per_bin else _interp_columns(sim_time, run.time_s, b) for name, b in basis.items()
     }
     return out
 
