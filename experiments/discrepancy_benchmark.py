@@ -174,6 +174,13 @@ def analyse(rows: list[dict], out: Path, pooled_from=()) -> dict:
     hits = df[df["correct"] & (df["effects"].map(len) > 0)]
     gap = hits.groupby("row")["gap_ratio"].agg(["count", "median", "max"])
     gap["share_at_most_0.5"] = hits.groupby("row")["gap_ratio"].apply(lambda s: float(np.mean(s <= 0.5)))
+    if "gap_test" in hits:
+        gap["scored_test"] = hits.groupby("row")["gap_test"].first()
+    if "truth_gap" in df:  # what is left of each effect after the base refit, beside its nominal SNR
+        effective = df[df["effects"].map(len) == 1].apply(
+            lambda r: (r["truth_gap"] or {}).get(r["effects"][0], {}).get("effective_snr", np.nan), axis=1
+        )
+        gap["effective_snr_median"] = effective.groupby(df["row"]).median()
     gap.to_csv(out / "gap.csv")
     high = recall[recall["snr"] >= 2]
     figures = {
@@ -237,7 +244,8 @@ def analyse(rows: list[dict], out: Path, pooled_from=()) -> dict:
             if len(two)
             else []
         ),
-        "## Held-out gap on correct detections (RMSE after / before, worst test)",
+        "## Held-out gap on correct detections (RMSE against the noise-free truth, after / before, on each "
+        "effect's scored test; effective SNR: RMS(truth - base model) / noise sd on that test, all runs)",
         "",
         markdown(gap),
         "",

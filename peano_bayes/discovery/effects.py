@@ -61,9 +61,10 @@ class Effect:
     ``params`` are held at ``hold`` while inactive); ``start`` name -> weak but non-zero value its screening
     fit starts from; ``strength`` the parameters tested against ``off``; ``signature`` the residual pattern
     its absence leaves (a key of :data:`~peano_bayes.discovery.diagnose.SIGNATURES`); ``shows_in`` the rig
-    tests where that pattern appears; ``model`` the :class:`~peano_bayes.physics.ModelConfig` fields that put
-    the effect into the inference model (empty where that model has no such element: the noise-side and
-    flexible terms, and ``cyclic_softening``).
+    tests where that pattern appears, the first the one the effect acts on most (:attr:`scored_test`);
+    ``model`` the :class:`~peano_bayes.physics.ModelConfig` fields that put the effect into the inference
+    model (empty where that model has no such element: the noise-side and flexible terms, and
+    ``cyclic_softening``).
     """
 
     name: str
@@ -77,6 +78,16 @@ class Effect:
     shows_in: tuple[str, ...]
     hold: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))
     model: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))
+
+    @property
+    def scored_test(self) -> str:
+        """The rig test on which the validation benchmark scores how much of the effect a model recovers (its
+        held-out gap against the noise-free truth), fixed here in advance rather than chosen after the fact as
+        the test with the largest noisy gap: the first of ``shows_in``, which lists first, of the tests where the
+        effect's signature appears, the one where it moves the noise-free signal most
+        (``discovery_benchmark.snr_by_test`` at SNR 2: threshold pressure stroke 2.0 against blocking 1.5, a
+        mount blocking 1.3 against load cycle 1.0, cyclic softening blocking 0.6 against load cycle 0.5)."""
+        return self.shows_in[0]
 
 
 def _effect(name, meaning, kind, params, off, start, strength, signature, shows_in, hold=None, model=None) -> Effect:
@@ -137,7 +148,7 @@ _LIST = (
         {"mount_compliance_m_per_n": 1e-7},
         ("mount_compliance_m_per_n",),
         "force_level",
-        ("load_cycle", "blocking"),
+        ("blocking", "load_cycle"),
         model={"mount": True},
     ),
     _effect(
@@ -187,7 +198,7 @@ _LIST = (
         {"threshold_pressure_pa": 500.0},
         ("threshold_pressure_pa",),
         "low_pressure",
-        ("blocking", "stroke"),
+        ("stroke", "blocking"),
         model={"threshold": True},
     ),
     _effect(
@@ -223,7 +234,7 @@ _LIST = (
         {"cyclic_softening_fraction": 0.01},
         ("cyclic_softening_fraction",),
         "first_cycle",
-        ("load_cycle", "blocking"),
+        ("blocking", "load_cycle"),
     ),
     _effect(
         "sensor_offset",

@@ -438,12 +438,15 @@ def _diagnosis_dict(d: Diagnosis) -> dict:
 @dataclass(frozen=True, eq=False)
 class Discovery:
     """What :func:`discover` returns: the JSON-ready ``report``, the ``split`` data, and the base and final
-    models' :class:`~peano_bayes.discovery.fitting.Evaluation` on the fitted runs (``before``, ``after``)."""
+    models' :class:`~peano_bayes.discovery.fitting.Evaluation` on the fitted runs (``before``, ``after``) and on
+    the held-out runs (``held_before``, ``held_after``)."""
 
     report: dict
     split: SplitData
     before: Evaluation
     after: Evaluation
+    held_before: Evaluation
+    held_after: Evaluation
 
 
 def discover(split: SplitData, *, base=DEFAULT_BASE, gates: Gates = Gates(), seed: int = 0, progress=None) -> Discovery:
@@ -579,7 +582,7 @@ def discover(split: SplitData, *, base=DEFAULT_BASE, gates: Gates = Gates(), see
         "gates": asdict(gates),
         "seconds": time.perf_counter() - started,
     }
-    return Discovery(report, split, first_fit, cur_fit)
+    return Discovery(report, split, first_fit, cur_fit, first_held, cur_held)
 
 
 __all__ = [
