@@ -41,6 +41,7 @@ from peano_bayes.fanout import Unit, make_executor, run_units
 from peano_bayes.validation.discovery_benchmark import (
     HIDEABLE,
     NOT_HIDEABLE,
+    TWO_MOUNTS,
     Case,
     failed_row,
     run_case,
@@ -53,7 +54,15 @@ HERE = Path(__file__).resolve().parent
 TWO_EFFECTS = ("hysteresis", "flow_restriction")
 
 
-CASE_LABELS = (*HIDEABLE, "none", "drift", "+".join(TWO_EFFECTS), "none-veale")
+CASE_LABELS = (
+    *HIDEABLE,
+    "none",
+    "drift",
+    "+".join(TWO_EFFECTS),
+    "none-veale",
+    Case(("series_compliance",), 2.0, mounts=TWO_MOUNTS).label,
+    Case(mounts=TWO_MOUNTS).label,
+)
 
 
 def cases(snrs, noise_levels, only=None) -> list[Case]:
@@ -62,6 +71,8 @@ def cases(snrs, noise_levels, only=None) -> list[Case]:
     out += [Case(force_sd_n=sd) for sd in noise_levels]
     out += [Case(drift=True), Case(TWO_EFFECTS, max(snrs))]
     out += [Case(physics="veale")]  # the null on another physics: Veale's force-balance model
+    # two mounts (the second of known compliance): the hidden mount, and the null on the same protocol
+    out += [Case(("series_compliance",), snr, mounts=TWO_MOUNTS) for snr in snrs] + [Case(mounts=TWO_MOUNTS)]
     return [c for c in out if only is None or c.label in only]
 
 
@@ -170,6 +181,8 @@ def analyse(rows: list[dict], out: Path, pooled_from=()) -> dict:
     drift_ok = int(drift["correct"].sum())
     other = df[df["label"] == "none-veale"]  # the null on another physics (Veale's force-balance model)
     other_fp = int(other["false_positive"].sum())
+    mounted = df[df["label"] == Case(mounts=TWO_MOUNTS).label]  # the null on two mounts
+    mounted_fp = int(mounted["false_positive"].sum())
     two = df[df["effects"].map(len) == 2]
     hits = df[df["correct"] & (df["effects"].map(len) > 0)]
     gap = hits.groupby("row")["gap_ratio"].agg(["count", "median", "max"])
@@ -193,6 +206,7 @@ def analyse(rows: list[dict], out: Path, pooled_from=()) -> dict:
         "drift_wilson_low": wilson_interval(drift_ok, len(drift))[0] if len(drift) else None,
         "other_physics_false_positive_rate": other_fp / len(other) if len(other) else None,
         "other_physics_false_positive_wilson_high": wilson_interval(other_fp, len(other))[1] if len(other) else None,
+        "two_mount_null_false_positive_rate": mounted_fp / len(mounted) if len(mounted) else None,
         "two_effects_exact": float(two["correct"].mean()) if len(two) else None,
         "gap_ratio_median_on_hits": float(hits["gap_ratio"].median()) if len(hits) else None,
         "gap_share_at_most_half_on_hits": float(np.mean(hits["gap_ratio"] <= 0.5)) if len(hits) else None,
@@ -233,6 +247,11 @@ def analyse(rows: list[dict], out: Path, pooled_from=()) -> dict:
                 "",
             ]
             if len(other)
+            else []
+        ),
+        *(
+            [f"## Nothing hidden, two mounts: a physics effect named in {mounted_fp} of {len(mounted)}", ""]
+            if len(mounted)
             else []
         ),
         *(

@@ -253,6 +253,10 @@ def infer(
     whole_prior = prior_of(dataset, prior)
     out = Path(out_dir) / _check_label(_default_label(dataset) if label is None else label)
     choice = _model_choice(dataset, whole_prior.config, out, discover=discover, resume=resume, seed=seed, log=log)
+    if any(r.added_compliance > 0 for r in dataset.runs) and not choice.config.mount:
+        # runs on a second, known mount only make sense with the mount in the model: they are there to measure it
+        log(f"{code}: some runs carry an added mount compliance, so the model includes the mount")
+        choice = dataclasses.replace(choice, config=dataclasses.replace(choice.config, mount=True))
     config = choice.config
     prior = whole_prior.for_config(config)
     observations = prepare(dataset)

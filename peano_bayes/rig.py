@@ -387,6 +387,7 @@ class _Truth:
     supply_pa: np.ndarray | None = None
     flow_m3_per_s: np.ndarray | None = None
     load_n: float | None = None
+    added_compliance_m_per_n: float | None = None
 
 
 def _specimen_truths(params, spec: MaterialSpec, config, protocol: RigProtocol, tests, progress, label):
@@ -452,6 +453,8 @@ def _measure(truth: _Truth, rng: np.random.Generator, noise: RigNoise, drift_off
         signals["flow_m3_per_s"] = truth.flow_m3_per_s + noise.flow_sd_m3_per_s * draws[4]
     if truth.load_n is not None:
         signals["load_n"] = np.full(n, truth.load_n)
+    if truth.added_compliance_m_per_n is not None:
+        signals["added_compliance_m_per_n"] = np.full(n, truth.added_compliance_m_per_n)
     return signals
 
 
@@ -508,6 +511,21 @@ def _fields(obj) -> dict:
     return {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)}
 
 
+#: Conditions per test of one mount's protocol (load cycles at 0 kPa and at the test pressure).
+_CONDITIONS = {"load_cycle": 2, "blocking": 1, "stroke": 1, "step": 1}
+
+
+def _check_mounts(added_compliances) -> tuple[float, ...]:
+    mounts = tuple(added_compliances)
+    if not 1 <= len(mounts) <= 4 or not all(
+        isinstance(c, int | float) and not isinstance(c, bool) and math.isfinite(c) and 0 <= c <= 1e-3 for c in mounts
+    ):
+        raise PeanoBayesInputError(
+            f"added_compliances must be 1 to 4 numbers in [0, 1e-3] m/N (one per mount), got {added_compliances!r}"
+        )
+    return tuple(float(c) for c in mounts)
+
+
 def simulate_dataset(
     material: str | MaterialSpec,
     true_params: Mapping[str, float] | None = None,
@@ -523,6 +541,7 @@ def simulate_dataset(
     tests: Iterable[str] = RIG_TESTS,
     protocol: RigProtocol = DEFAULT_PROTOCOL,
     progress: Callable[[str], None] | None = None,
+    added_compliances: Iterable[float] = (0.0,),
 ) -> Dataset:
     """Run the paper's test protocol on virtual specimens of a material; return the rig dataset.
 
@@ -546,6 +565,12 @@ def simulate_dataset(
       (:func:`specimen_parameters`); ``specimens`` (named A, B, ...) and ``repeats`` per test (paper: 2 and 3).
     - ``tests``: which of ``load_cycle``, ``blocking``, ``stroke``, ``step`` to run (default: all);
       ``protocol``: :class:`RigProtocol`; ``progress``: called with a line of text after each simulated test.
+    - ``added_compliances`` [m/N]: the mounts each specimen is tested on, as the known compliance each adds in
+      series with the specimen's own mount (default one mount, nothing added). With several, the whole
+      protocol runs once per mount, in this order, and every run records its mount in
+      ``added_compliance_m_per_n``; run numbers continue across mounts (the second mount's load cycles at
+      0 kPa are runs ``2 repeats .. 3 repeats-1``). A positive one switches the mount element on (the
+      specimen's own mount then defaults to 0, rigid).
 
     **Returns:** a :class:`~peano_bayes.data.Dataset` on :data:`~peano_bayes.physics.PAPER_GEOMETRY`. Load cycle
     runs ``0 .. repeats-1`` are at 0 kPa, ``repeats .. 2 repeats-1`` at the test pressure. ``force_n`` is NaN in
@@ -560,6 +585,10 @@ def simulate_dataset(
     spec = materials.material(material)
     quirk_names = check_quirks(quirks)
     final_config = apply_quirks(config, quirk_names)
+    mounts = _check_mounts(added_compliances)
+    if any(c > 0 for c in mounts) and not final_config.mount:
+        final_config = dataclasses.replace(final_config, mount=True)
+        true_params = {"mount_compliance_m_per_n": PARAMETERS["mount_compliance_m_per_n"].off, **(true_params or {})}
     params, fallback = resolve_parameters(true_params, final_config)
     seed, repeats, specimens, tests = _check_run(seed, repeats, specimens, tests, specimen_spread)
     report = progress or (lambda line: None)
@@ -569,7 +598,19 @@ def simulate_dataset(
         label = string.ascii_uppercase[index]
         own = specimen_parameters(params, specimen_spread, np.random.default_rng([seed, _SPECIMEN_STREAM, index]))
         per_specimen[label] = own
-        truths = _specimen_truths(own, spec, final_config, protocol, tests, report, label)
+        truths = []
+        for k, added in enumerate(mounts):
+            mounted = dict(own)
+            if added > 0:
+                mounted["mount_compliance_m_per_n"] = own["mount_compliance_m_per_n"] + added
+            truths += [
+                dataclasses.replace(
+                    t,
+                    condition=t.condition + k * _CONDITIONS[t.test],
+                    added_compliance_m_per_n=added if mounts != (0.0,) else None,
+                )
+                for t in _specimen_truths(mounted, spec, final_config, protocol, tests, report, label)
+            ]
         runs += _session_runs(label, index, truths, seed=seed, noise=noise, repeats=repeats, drift=drift)
     return Dataset(
         material=spec.data_material(),

@@ -270,3 +270,79 @@ def test_binned_predictions_follow_the_path_of_a_high_friction_muscle():
         predicted, _, _ = group_log_likelihood(params, group, config=config, geometry=data.geometry)
         error = np.abs(group.observed - np.asarray(predicted))
         assert np.nanmax(error) < 0.05, (group.test, np.nanmax(error))
+
+
+_TWO_MOUNTS = (0.0, 2e-5)
+_MOUNT_CONFIG = ModelConfig(bending=True, tensile=True, extension=False, friction="none", mount=True)
+_QUIET = RigNoise(0.0, 0.0, 0.0, 0.0, 0.0)
+
+
+def _two_mount_session(params, tmp_path):
+    """PC's load cycles and blocking on two mounts (the second adds 2e-5 m/N), one specimen, one repeat,
+    noise-free, written and read back through the data format."""
+    from peano_bayes.data import save
+
+    dataset = simulate_dataset(
+        "PC", params, config=_MOUNT_CONFIG, seed=3, noise=_QUIET, specimens=1, repeats=1,
+        tests=("load_cycle", "blocking"), protocol=RigProtocol(quasi_static_rate_hz=5.0), added_compliances=_TWO_MOUNTS,
+    )
+    return load(save(dataset, tmp_path / "two_mounts.csv"))
+
+
+def test_runs_on_a_second_mount_record_it_and_the_likelihood_adds_it(tmp_path):
+    """The rig runs the protocol once per mount and each run records its mount's added compliance, which the
+    reader returns; the likelihood adds it to the specimen's own mount, so at the generating values every run of
+    both mounts is predicted to round-off, and with the added compliance dropped the second mount's are not."""
+    params = {**_MOUNT_CONFIG.nominal_parameters(), "tensile_ka_n_per_m": 2000.0, "mount_compliance_m_per_n": 1e-5}
+    dataset = _two_mount_session(params, tmp_path)
+    mounts = {(r.test, r.run): r.added_compliance for r in dataset.runs}
+    assert mounts == {
+        ("load_cycle", 0): 0.0, ("load_cycle", 1): 0.0, ("load_cycle", 2): 2e-5, ("load_cycle", 3): 2e-5,
+        ("blocking", 0): 0.0, ("blocking", 1): 2e-5,
+    }
+    truth = {k: jnp.asarray(v) for k, v in json.loads(dataset.provenance["specimen_parameters"])["A"].items()}
+    observations = prepare(dataset, {"load_cycle": 1, "blocking": 1}, denoise_inputs=False)
+    for group in observations.groups:
+        predicted, _ = predict(truth, group, config=_MOUNT_CONFIG)
+        scale = float(np.max(np.abs(group.observed)))
+        np.testing.assert_allclose(np.asarray(predicted), group.observed, rtol=0, atol=1e-9 * scale)
+        dropped = replace(group, added_compliance_m_per_n=np.zeros_like(group.added_compliance_m_per_n))
+        wrong, _ = predict(truth, dropped, config=_MOUNT_CONFIG)
+        second = np.asarray(group.added_compliance_m_per_n)[group.shared] > 0
+        assert np.max(np.abs(np.asarray(wrong) - group.observed)[second]) > 0.01 * scale, group.test
+
+
+def test_two_known_mounts_do_not_separate_a_mount_from_a_linear_film(tmp_path):
+    """Why a second mount of known compliance cannot name a hidden mount: with a linear film (kb = 0) the film
+    ka and a mount c are one series chain, ka / (1 + ka c), and a known added compliance c2 extends the chain in
+    both readings: film ka with mount c + c2 and film ka / (1 + ka c) with mount c2 give the same signals on
+    both mounts. Measured: every run of both mounts agrees to round-off."""
+    ka, c = 2000.0, 1e-5
+    base = {**_MOUNT_CONFIG.nominal_parameters(), "tensile_kb_n_per_m2": 0.0}
+    dataset = _two_mount_session({**base, "tensile_ka_n_per_m": ka, "mount_compliance_m_per_n": c}, tmp_path)
+    film = {k: jnp.asarray(v) for k, v in base.items()}
+    film_only = film | {"tensile_ka_n_per_m": jnp.asarray(ka / (1 + ka * c)), "mount_compliance_m_per_n": 0.0}
+    with_mount = film | {"tensile_ka_n_per_m": jnp.asarray(ka), "mount_compliance_m_per_n": jnp.asarray(c)}
+    for group in prepare(dataset, {"load_cycle": 1, "blocking": 1}, denoise_inputs=False).groups:
+        a, _ = predict(with_mount, group, config=_MOUNT_CONFIG)
+        b, _ = predict(film_only, group, config=_MOUNT_CONFIG)
+        scale = float(np.max(np.abs(np.asarray(a))))
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=0, atol=1e-9 * scale, err_msg=group.test)
+
+
+def test_an_added_mount_needs_the_mount_element_and_the_rig_checks_its_mounts(tmp_path):
+    """A posterior on runs with an added compliance and a model without the mount element would ignore it:
+    build_posterior refuses, naming a run; with the mount it builds. The rig refuses a negative or missing
+    mount list before simulating anything."""
+    from peano_bayes.errors import PeanoBayesInputError
+    from peano_bayes.inference import prior_for
+    from peano_bayes.inference.posterior import build_posterior
+
+    observations = prepare(_two_mount_session(_MOUNT_CONFIG.nominal_parameters(), tmp_path))
+    prior = prior_for("PC")
+    with pytest.raises(ValueError, match=r"first \('A', '\w+', \d\)\) carry an added mount compliance"):
+        build_posterior(observations, prior, config=replace(prior.config, mount=False))
+    assert build_posterior(observations, prior, config=replace(prior.config, mount=True)).ndim > 0
+    for bad in ((), (0.0, -1e-5), (0.0, float("nan"))):
+        with pytest.raises(PeanoBayesInputError, match="added_compliances"):
+            simulate_dataset("PC", added_compliances=bad)

@@ -20,8 +20,9 @@ from .format import TESTS
 #: The signal fields of a :class:`Run`, in order; the first four are always arrays, the rest may be ``None``.
 SIGNALS: tuple[str, ...] = (
     "time_s", "pressure_pa", "strain", "force_n", "supply_pa", "flow_m3_per_s", "load_n",
+    "added_compliance_m_per_n",
 )
-OPTIONAL_SIGNALS: tuple[str, ...] = ("supply_pa", "flow_m3_per_s", "load_n")
+OPTIONAL_SIGNALS: tuple[str, ...] = ("supply_pa", "flow_m3_per_s", "load_n", "added_compliance_m_per_n")
 
 
 def _frozen_array(value, name: str) -> np.ndarray:
@@ -39,7 +40,9 @@ class Run:
     **Fields:** ``specimen``; ``test`` (one of :data:`~peano_bayes.data.format.TESTS`); ``run`` index >= 0;
     ``time_s`` [s]; ``pressure_pa`` gauge pressure in the muscle [Pa]; ``strain`` contraction over l0 [-];
     ``force_n`` tension at the load cell [N]; optional ``supply_pa`` [Pa], ``flow_m3_per_s`` into the muscle
-    [m^3/s], ``load_n`` [N], ``None`` when the file has no such column. All arrays are read-only float64 of
+    [m^3/s], ``load_n`` [N], ``added_compliance_m_per_n`` a known series compliance added to the rig's mount for
+    this run [m/N] (one value per run: two mounts tell the film's stiffness from the mount's), ``None`` when the
+    file has no such column. All arrays are read-only float64 of
     one length; NaN marks a cell the test does not measure.
     """
 
@@ -53,6 +56,7 @@ class Run:
     supply_pa: np.ndarray | None = None
     flow_m3_per_s: np.ndarray | None = None
     load_n: np.ndarray | None = None
+    added_compliance_m_per_n: np.ndarray | None = None
 
     def __post_init__(self):
         n = None
@@ -67,6 +71,12 @@ class Run:
                 raise ValueError(f"Run.{name} has {arr.shape[0]} samples, Run.time_s has {n}")
             n = arr.shape[0]
             object.__setattr__(self, name, arr)
+
+    @property
+    def added_compliance(self) -> float:
+        """The run's known added series compliance [m/N]; 0 where the file has none."""
+        c = self.added_compliance_m_per_n
+        return float(np.nanmedian(c)) if c is not None and np.any(np.isfinite(c)) else 0.0
 
     def __len__(self) -> int:
         """Number of samples."""

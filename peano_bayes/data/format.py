@@ -114,7 +114,14 @@ COLUMNS: tuple[Column, ...] = (
            "flow into the muscle (negative = out)"),
     Column("load_n", "float", "N", "load_n", "N", 0, Range(-100.0, 5000.0), False, frozenset(),
            "hanging or inertial load (weight) on the muscle"),
+    Column("added_compliance_mm_per_n", "float", "mm/N", "added_compliance_m_per_n", "m/N", -3, Range(0.0, 100.0),
+           False, frozenset(),
+           "known series compliance added between muscle and load cell for this run (a second, softer mount), "
+           "the same in every row of the run; empty or absent: none. Runs on two mounts separate the mount "
+           "from the film's own stiffness"),
 )
+#: Columns whose value is one per run (every filled row of a run must repeat it).
+PER_RUN_COLUMNS: frozenset[str] = frozenset({"added_compliance_mm_per_n"})
 COLUMN_BY_NAME: dict[str, Column] = {c.name: c for c in COLUMNS}
 #: Columns every header must name.
 HEADER_COLUMNS: tuple[str, ...] = tuple(c.name for c in COLUMNS if c.in_header)

@@ -32,6 +32,7 @@ from .format import (
     KEYS,
     MIN_SAMPLES_PER_RUN,
     OPEN_SECTIONS,
+    PER_RUN_COLUMNS,
     SECTIONS,
     TESTS,
     Column,
@@ -318,6 +319,20 @@ def _parse_rows(
             expected=f"at least one run of at least {MIN_SAMPLES_PER_RUN} samples",
         )
     for key, acc in runs.items():
+        for c in PER_RUN_COLUMNS & set(float_columns):
+            values, rows = acc.values[c], list(acc.times.values())
+            filled = [i for i, v in enumerate(values) if v == v]
+            odd = next((i for i, v in enumerate(values) if filled and not v == values[filled[0]]), None)
+            if odd is not None:
+                first = values[filled[0]]
+                raise DataFormatError(
+                    f"{c} differs between the rows of run {_run_label(key)}",
+                    file=name,
+                    row=rows[odd],
+                    column=c,
+                    value="" if values[odd] != values[odd] else f"{values[odd]:g}",
+                    expected=f"{first:g} {COLUMN_BY_NAME[c].unit} as in row {rows[filled[0]]}: one value per run",
+                )
         if len(acc.times) < MIN_SAMPLES_PER_RUN:
             raise DataFormatError(
                 f"run {_run_label(key)} has too few samples",

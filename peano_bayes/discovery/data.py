@@ -149,6 +149,7 @@ def _take(group: RunGroup, rows: np.ndarray, cycle: np.ndarray) -> RunGroup:
         pressure_pa=pick(group.pressure_pa),
         supply_pa=pick(group.supply_pa),
         load_n=pick(group.load_n),
+        added_compliance_m_per_n=pick(group.added_compliance_m_per_n),
         observed=pick(group.observed),
         counts=pick(group.counts),
         shared=np.arange(len(rows)),

@@ -140,6 +140,8 @@ class RunGroup:
     :attr:`Observations.specimens`; ``time_s``, ``strain``, ``pressure_pa``, ``supply_pa`` (u, p m) the
     simulation's times and inputs, ``p`` = :attr:`points_per_bin` per bin (``supply_pa`` only for steps);
     ``bin_time_s`` (u, m) mean time of each bin; ``load_n`` (u,) hanging or inertial load [N];
+    ``added_compliance_m_per_n`` (u,) known series compliance added to the mount's for the run [m/N] (0: none;
+    it adds to ``mount_compliance_m_per_n``, so the model's configuration needs its mount element);
     ``strain_error``, ``pressure_error`` (u, q, p m) or ``None``: the columns of the fitted inputs' error at
     the simulation's times (``a ~ N(0, I_q)``, zero columns pad sets with fewer; see the module docstring);
     ``bin_nodes`` (u, p m) int: where each bin's ``p`` points sit among a row's ``L >= p m`` simulated points
@@ -162,6 +164,7 @@ class RunGroup:
     bin_nodes: np.ndarray
     strain_error: np.ndarray | None = None
     pressure_error: np.ndarray | None = None
+    added_compliance_m_per_n: np.ndarray | None = None
 
     @property
     def has_input_error(self) -> bool:
@@ -210,6 +213,7 @@ jax.tree_util.register_dataclass(
         "strain_error",
         "pressure_error",
         "bin_nodes",
+        "added_compliance_m_per_n",
     ],
     meta_fields=["test", "keys"],
 )
@@ -437,6 +441,7 @@ def _reduce_run(
     out["observed"], out["counts"] = bin_means(getattr(run, signal), k)
     has_load = run.load_n is not None and np.any(np.isfinite(run.load_n))
     out["load_n"] = float(np.nanmedian(run.load_n)) if has_load else None
+    out["added_compliance"] = run.added_compliance
     out["input_sd"] = input_sd
     out["error_basis"] = {
         name: b if one_per_bin else _interp_columns(sim_time, run.time_s, b) for name, b in basis.items()
@@ -489,6 +494,7 @@ def _share_repeats(members: list) -> tuple[np.ndarray, np.ndarray]:
             same = bool(red["input_sd"]) and (
                 run.specimen == other_run.specimen
                 and red["load_n"] == other["load_n"]
+                and red["added_compliance"] == other["added_compliance"]
                 and np.allclose(red["time_s"], other["time_s"], rtol=0.0, atol=1e-9)
                 and all(
                     name in other["input_sd"]
@@ -587,6 +593,7 @@ def prepare(
                 strain_error=errors["strain"],
                 pressure_error=errors["pressure_pa"],
                 bin_nodes=np.stack([members[i][1]["bin_nodes"] for i in simulated]),
+                added_compliance_m_per_n=np.array([members[i][1]["added_compliance"] for i in simulated]),
             )
         )
     return Observations(specimens, tuple(groups), bin_sizes, dataset.geometry, per_segment)
@@ -623,13 +630,16 @@ def _predict_sets(params, group: RunGroup, strain, pressure_pa, config: ModelCon
     ``pressure_pa`` (u, p m), and each row's solver error (u,)."""
     model, offset = _per_specimen(params)
 
-    def one(specimen, time_s, strain, pressure, supply, load):
+    def one(specimen, time_s, strain, pressure, supply, load, added):
         p = {k: (v[specimen] if jnp.ndim(v) else v) for k, v in model.items()}
         if offset is not None:
             p = {k: v * jnp.exp(offset[k][specimen]) if k in offset else v for k, v in p.items()}
+        if config.mount:  # a known added mount in series with the specimen's own
+            p["mount_compliance_m_per_n"] = p["mount_compliance_m_per_n"] + added
         return _simulate(group.test, p, time_s, strain, pressure, supply, load, config, geometry)
 
     supply = group.supply_pa if group.supply_pa is not None else pressure_pa
+    added = group.added_compliance_m_per_n
     predicted, error = jax.vmap(one)(
         jnp.asarray(group.specimen_index),
         jnp.asarray(group.time_s),
@@ -637,6 +647,7 @@ def _predict_sets(params, group: RunGroup, strain, pressure_pa, config: ModelCon
         pressure_pa,
         jnp.asarray(supply),
         jnp.asarray(group.load_n),
+        jnp.zeros(len(group.load_n)) if added is None else jnp.asarray(added),
     )
     return group.per_bin(predicted).mean(axis=-1), error
 

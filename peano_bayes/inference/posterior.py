@@ -318,6 +318,18 @@ def build_posterior(
     tests = {g.test for g in observations.groups}
     if not tests:
         raise ValueError("the dataset has no runs to fit")
+    added = [
+        key
+        for g in observations.groups
+        if g.added_compliance_m_per_n is not None
+        for key, c in zip(g.keys, g.added_compliance_m_per_n[g.shared], strict=True)
+        if c > 0
+    ]
+    if added and not config.mount:
+        raise ValueError(
+            f"{len(added)} runs (first {added[0]}) carry an added mount compliance, but the model has no mount "
+            "element to add it to: use a configuration with mount=True"
+        )
     model = [n for n in config.parameter_names() if "step" in tests or n not in STEP_ONLY_PARAMETERS]
     noise = [OBSERVED[t][1] for t in OBSERVED if t in tests]
     pooling = [SPECIMEN_SD] if len(observations.specimens) > 1 else []

@@ -48,6 +48,9 @@ REPEATS = 3
 PHYSICS = ("peano", "veale")
 #: Reference force noise [N] at which SNRs are calibrated; strain noise scales with it (2e-4 per 0.2 N).
 REFERENCE_FORCE_SD_N = 0.2
+#: The second mount of the two-mount cases [m/N]: twice the series compliance the benchmark hides at SNR 2.
+SECOND_MOUNT_M_PER_N = 2e-5
+TWO_MOUNTS = (0.0, SECOND_MOUNT_M_PER_N)
 #: Load-cell drift of the out-of-library case [N/s] (about 0.7 N over one specimen's session).
 DRIFT_N_PER_S = 0.005
 
@@ -90,7 +93,9 @@ class Case:
     pressure sensors' noise [Pa] (default the rig's, :class:`~peano_bayes.rig.RigNoise`; probes shrink it).
     ``physics``: ``"peano"`` (the package's own model, the default) or ``"veale"``, a null case whose data come
     from another model of the same muscle (:func:`~peano_bayes.rig.simulate_veale_dataset`, Table 2 values,
-    quasi-static tests only): no library effect is hidden, so naming one is a false positive."""
+    quasi-static tests only): no library effect is hidden, so naming one is a false positive. ``mounts``: the
+    known compliances the specimen is tested on (:data:`TWO_MOUNTS` runs the protocol on the rig's mount and
+    on one :data:`SECOND_MOUNT_M_PER_N` softer; every run records its mount, see ``docs/data-format.md``)."""
 
     effects: tuple[str, ...] = ()
     snr: float = 0.0
@@ -98,12 +103,13 @@ class Case:
     force_sd_n: float = REFERENCE_FORCE_SD_N
     pressure_sd_pa: float = RigNoise.pressure_sd_pa
     physics: str = "peano"
+    mounts: tuple[float, ...] = (0.0,)
 
     def __post_init__(self):
         if self.physics not in PHYSICS:
             raise ValueError(f"Case.physics must be one of {', '.join(PHYSICS)}, got {self.physics!r}")
-        if self.physics != "peano" and (self.effects or self.drift):
-            raise ValueError("a case on other physics is a null case: no hidden effects and no drift")
+        if self.physics != "peano" and (self.effects or self.drift or self.mounts != (0.0,)):
+            raise ValueError("a case on other physics is a null case on one mount: no hidden effects and no drift")
 
     @property
     def label(self) -> str:
@@ -111,7 +117,8 @@ class Case:
             return f"none-{self.physics}"
         if self.drift:
             return "drift"
-        return "+".join(self.effects) if self.effects else "none"
+        name = "+".join(self.effects) if self.effects else "none"
+        return name + (f"@{len(self.mounts)}mounts" if self.mounts != (0.0,) else "")
 
 
 def rig_noise(force_sd_n: float, pressure_sd_pa: float = RigNoise.pressure_sd_pa) -> RigNoise:
@@ -124,8 +131,11 @@ def rig_noise(force_sd_n: float, pressure_sd_pa: float = RigNoise.pressure_sd_pa
     )
 
 
-def _simulate(params: dict, quirks: tuple, seed: int, noise: RigNoise, drift: bool, softening: float) -> Dataset:
+def _simulate(
+    params: dict, quirks: tuple, seed: int, noise: RigNoise, drift: bool, softening: float, mounts=(0.0,)
+) -> Dataset:
     kw = dict(
+        added_compliances=mounts,
         config=TRUTH_CONFIG,
         quirks=quirks,
         seed=seed,
@@ -226,7 +236,8 @@ def hidden_dataset(case: Case, seed: int, strengths: dict | None = None) -> Data
         return simulate_veale_dataset(MATERIAL, seed=seed, noise=noise, specimens=1, repeats=REPEATS, protocol=PROTOCOL)
     strengths = strengths or {e: strength_for_snr(e, case.snr) for e in case.effects}
     params, quirks, softening = _truth(case.effects, strengths)
-    return _simulate(params, quirks, seed, rig_noise(case.force_sd_n, case.pressure_sd_pa), case.drift, softening)
+    noise = rig_noise(case.force_sd_n, case.pressure_sd_pa)
+    return _simulate(params, quirks, seed, noise, case.drift, softening, case.mounts)
 
 
 def outcome_label(report: dict) -> str:
@@ -278,7 +289,7 @@ def noise_free_dataset(case: Case, seed: int, strengths: dict | None = None) -> 
         return simulate_veale_dataset(MATERIAL, seed=seed, noise=QUIET, specimens=1, repeats=REPEATS, protocol=PROTOCOL)
     strengths = strengths or {e: strength_for_snr(e, case.snr) for e in case.effects}
     params, quirks, softening = _truth(case.effects, strengths)
-    return _simulate(params, quirks, seed, QUIET, False, softening)
+    return _simulate(params, quirks, seed, QUIET, False, softening, case.mounts)
 
 
 def _rmse(x: np.ndarray) -> float:
@@ -343,7 +354,7 @@ def truth_gap(case: Case, seed: int, result, strengths: dict | None = None, test
 
 def run_key(case: Case, seed: int) -> str:
     """The stable name of one benchmark run (its work-unit key and its row's ``key``)."""
-    return f"{case.label}|{case.snr:g}|{case.force_sd_n:g}|{int(case.drift)}|{seed}"
+    return f"{case.label}|{case.snr:g}|{case.force_sd_n:g}|{int(case.drift)}|{seed}"  # mounts: in the label
 
 
 def run_case(case: Case, seed: int, strengths: dict, tests: tuple[str, ...] | None = None) -> dict:
