@@ -606,14 +606,14 @@ def test_report_names_close_calls_outside_the_confusable_pairs():
 
 
 def test_report_says_the_tensile_stiffness_stands_for_a_mount_it_lacks():
-    """On one mount a series mount is the film at the series stiffness (tests/test_simulate.py): a final model
-    with the tensile stiffness and no mount says so, with the experiment that would separate them; a model with
-    both does not."""
+    """A series mount is the film at the series stiffness (tests/test_simulate.py), on any number of mounts of
+    known compliance (tests/test_likelihood.py): a final model with the tensile stiffness and no mount says so,
+    with the measurement that would separate them; a model with both does not."""
     from peano_bayes.discovery.report import _absorbed_notes
 
     (note, _) = _absorbed_notes(["tensile_stiffness", "bending_stiffness", "hysteresis"])
     assert note.startswith("`tensile_stiffness` also stands for `series_compliance`")
-    assert "two mounts of different stiffness" in note
+    assert "measured on the muscle" in note and "does not separate them" in note
     assert _absorbed_notes(["tensile_stiffness", "series_compliance"]) == []
     assert _absorbed_notes(["bending_stiffness", "hysteresis"]) == []
 

@@ -41,7 +41,7 @@ class Run:
     ``time_s`` [s]; ``pressure_pa`` gauge pressure in the muscle [Pa]; ``strain`` contraction over l0 [-];
     ``force_n`` tension at the load cell [N]; optional ``supply_pa`` [Pa], ``flow_m3_per_s`` into the muscle
     [m^3/s], ``load_n`` [N], ``added_compliance_m_per_n`` a known series compliance added to the rig's mount for
-    this run [m/N] (one value per run: two mounts tell the film's stiffness from the mount's), ``None`` when the
+    this run [m/N] (one value per run; it adds to the model's mount compliance), ``None`` when the
     file has no such column. All arrays are read-only float64 of
     one length; NaN marks a cell the test does not measure.
     """

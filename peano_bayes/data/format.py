@@ -117,8 +117,7 @@ COLUMNS: tuple[Column, ...] = (
     Column("added_compliance_mm_per_n", "float", "mm/N", "added_compliance_m_per_n", "m/N", -3, Range(0.0, 100.0),
            False, frozenset(),
            "known series compliance added between muscle and load cell for this run (a second, softer mount), "
-           "the same in every row of the run; empty or absent: none. Runs on two mounts separate the mount "
-           "from the film's own stiffness"),
+           "the same in every row of the run; empty or absent: none"),
 )
 #: Columns whose value is one per run (every filled row of a run must repeat it).
 PER_RUN_COLUMNS: frozenset[str] = frozenset({"added_compliance_mm_per_n"})

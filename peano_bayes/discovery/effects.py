@@ -305,8 +305,9 @@ CONFUSABLE: MappingProxyType = MappingProxyType(
         "a viscoelastic loop grows with rate, a friction loop does not",
         frozenset({"flow_restriction", "nonlinear_damping"}): "isometric (blocked) steps as well as free steps: "
         "an inlet restriction delays the force of a blocked muscle, load damping does not",
-        frozenset({"series_compliance", "tensile_stiffness"}): "the same muscle on two mounts of different "
-        "stiffness: only the mount's share changes",
+        frozenset({"series_compliance", "tensile_stiffness"}): "the muscle's own strain measured on the muscle "
+        "(not at the actuator), or the mount's compliance measured on its own: a second mount of known "
+        "compliance adds to the same series chain and does not separate them",
         frozenset({"series_compliance", "sensor_gain"}): "a calibration weight on the load cell",
         frozenset({"cyclic_softening", "viscoelastic_relaxation"}): "the first cycle repeated after a long rest: "
         "softening that recovers is viscoelastic, softening that stays is damage",
