@@ -44,6 +44,8 @@ PROTOCOL = RigProtocol(
     step_substeps=2,
 )
 REPEATS = 3
+#: A rig without sensor noise or drift.
+QUIET = RigNoise(0.0, 0.0, 0.0, 0.0, 0.0)
 #: Where a case's data come from: the package's own physics, or Veale's force-balance model (a null case).
 PHYSICS = ("peano", "veale")
 #: Reference force noise [N] at which SNRs are calibrated; strain noise scales with it (2e-4 per 0.2 N).
@@ -198,10 +200,9 @@ def reference_sigma(test: str) -> float:
 def snr_by_test(effect: str, strength: float) -> dict[str, float]:
     """Per rig test: RMS(y_with - y_without) / sigma of ``effect`` at ``strength``, at equal base parameters,
     noise-free (sigma: the rig's per-sample noise at :data:`REFERENCE_FORCE_SD_N`)."""
-    quiet = RigNoise(0.0, 0.0, 0.0, 0.0, 0.0)
-    without = _simulate(dict(TRUTH_PARAMS), (), 0, quiet, False, 0.0)
+    without = _simulate(dict(TRUTH_PARAMS), (), 0, QUIET, False, 0.0)
     params, quirks, softening = _truth((effect,), {effect: strength})
-    with_ = _simulate(params, quirks, 0, quiet, False, softening)
+    with_ = _simulate(params, quirks, 0, QUIET, False, softening)
     out = {}
     for test in sorted({r.test for r in without.runs}):
         signal = OBSERVED[test][0]
@@ -229,15 +230,16 @@ def strength_for_snr(effect: str, snr: float, iterations: int = 12) -> float:
     return math.exp(0.5 * (lo + hi))
 
 
-def hidden_dataset(case: Case, seed: int, strengths: dict | None = None) -> Dataset:
-    """The rig dataset of ``case`` (strengths by effect, default calibrated by :func:`strength_for_snr`)."""
+def hidden_dataset(case: Case, seed: int, strengths: dict | None = None, *, quiet: bool = False) -> Dataset:
+    """The rig dataset of ``case`` (strengths by effect, default calibrated by :func:`strength_for_snr`). With
+    ``quiet``, the same session without sensor noise or load-cell drift: the same specimens and inputs (the rig
+    draws specimens and noise from separate streams), the signals as the muscle made them."""
+    noise = QUIET if quiet else rig_noise(case.force_sd_n, case.pressure_sd_pa)
     if case.physics == "veale":
-        noise = rig_noise(case.force_sd_n, case.pressure_sd_pa)
         return simulate_veale_dataset(MATERIAL, seed=seed, noise=noise, specimens=1, repeats=REPEATS, protocol=PROTOCOL)
     strengths = strengths or {e: strength_for_snr(e, case.snr) for e in case.effects}
     params, quirks, softening = _truth(case.effects, strengths)
-    noise = rig_noise(case.force_sd_n, case.pressure_sd_pa)
-    return _simulate(params, quirks, seed, noise, case.drift, softening, case.mounts)
+    return _simulate(params, quirks, seed, noise, case.drift and not quiet, softening, case.mounts)
 
 
 def outcome_label(report: dict) -> str:
@@ -277,19 +279,9 @@ def score(case: Case, report: dict) -> dict:
     }
 
 
-#: A rig without sensor noise or drift: the truth the benchmark scores models against.
-QUIET = RigNoise(0.0, 0.0, 0.0, 0.0, 0.0)
-
-
 def noise_free_dataset(case: Case, seed: int, strengths: dict | None = None) -> Dataset:
-    """The sessions of ``hidden_dataset(case, seed, strengths)`` without sensor noise or load-cell drift: the
-    same specimens and inputs (the rig draws specimens and noise from separate streams), the signals as the
-    muscle made them."""
-    if case.physics == "veale":
-        return simulate_veale_dataset(MATERIAL, seed=seed, noise=QUIET, specimens=1, repeats=REPEATS, protocol=PROTOCOL)
-    strengths = strengths or {e: strength_for_snr(e, case.snr) for e in case.effects}
-    params, quirks, softening = _truth(case.effects, strengths)
-    return _simulate(params, quirks, seed, QUIET, False, softening, case.mounts)
+    """``hidden_dataset(case, seed, strengths, quiet=True)``: the truth the benchmark scores models against."""
+    return hidden_dataset(case, seed, strengths, quiet=True)
 
 
 def _rmse(x: np.ndarray) -> float:
