@@ -156,6 +156,11 @@ _QUIRK_LIST = (
         "a Maxwell branch across the contractile unit (parallel_maxwell1_*)",
         lambda c: dataclasses.replace(c, parallel_maxwell=max(c.parallel_maxwell, 1)),
     ),
+    Quirk(
+        "series_viscoelastic",
+        "a Kelvin-Voigt unit in series with the tensile spring (series_kelvin1_*)",
+        lambda c: dataclasses.replace(c, series_kelvin=max(c.series_kelvin, 1)),
+    ),
     Quirk("strain_stiffening", "passive stiffening in extension (extension_*)", _replace(extension=True)),
     Quirk(
         "threshold_pressure",

@@ -19,7 +19,7 @@ from peano_bayes.cli import main
 from peano_bayes.data import save
 from peano_bayes.discovery import LIBRARY, discovery_data
 from peano_bayes.discovery.data import DISCOVERY_BIN_SIZES, DISCOVERY_EVERY_SAMPLE
-from peano_bayes.discovery.diagnose import diagnose, signature_statistic
+from peano_bayes.discovery.diagnose import diagnose, signature_statistic, signature_weights
 from peano_bayes.discovery.effects import (
     BASELINE_PARAMETERS,
     CONFUSABLE,
@@ -69,6 +69,7 @@ QUASI_STATIC = ("load_cycle", "blocking", "stroke")
 DESIGN_EFFECTS = (
     "hysteresis",
     "viscoelastic_relaxation",
+    "series_viscoelastic",
     "series_compliance",
     "bending_stiffness",
     "tensile_stiffness",
@@ -226,6 +227,7 @@ def test_signature_test_respects_block_structure():
         pressure_pa=np.full(n, 2e5),
         strain=np.tile(np.concatenate([np.linspace(0.1, -0.01, 50), np.linspace(-0.01, 0.1, 50)]), 4),
         rate_sign=np.tile(np.repeat([-1.0, 1.0], 50), 4),
+        time_since_reversal_s=np.tile(np.arange(50.0), 8),
         time_since_step_s=np.full(n, np.nan),
         session_s=np.arange(n, dtype=float),
     )
@@ -244,6 +246,57 @@ def test_signature_test_respects_block_structure():
         naive_rejects += signature_statistic(blocky, w) > 1.96
     assert block_rejects <= 12  # Binomial(100, 0.05) exceeds 12 with probability 0.002
     assert naive_rejects >= 30
+
+
+def _cycle_covariates(pressures_pa, bins_per_half=50, dt_s=0.4):
+    """Covariates of load cycles (stretch, then relax), one run per pressure, as discovery builds them."""
+    from peano_bayes.discovery.data import Covariates, _time_since_reversal
+
+    runs, m = len(pressures_pa), 2 * bins_per_half
+    t = np.arange(m) * dt_s
+    strain = np.concatenate([np.linspace(0.1, -0.01, bins_per_half), np.linspace(-0.01, 0.1, bins_per_half)])
+    rate = np.sign(np.gradient(strain))
+    return Covariates(
+        test=np.array(["load_cycle"] * (runs * m)),
+        run=np.repeat(np.arange(runs), m),
+        block=np.arange(runs * m) // 10,
+        cycle=np.zeros(runs * m, dtype=int),
+        pressure_pa=np.repeat(np.asarray(pressures_pa, dtype=float), m),
+        strain=np.tile(strain, runs),
+        rate_sign=np.tile(rate, runs),
+        time_since_reversal_s=np.tile(_time_since_reversal(t, rate), runs),
+        time_since_step_s=np.full(runs * m, np.nan),
+        session_s=np.arange(runs * m) * dt_s,
+    )
+
+
+def test_time_since_reversal_restarts_where_the_strain_turns():
+    from peano_bayes.discovery.data import _time_since_reversal
+
+    t = np.arange(6) * 0.5
+    np.testing.assert_array_equal(_time_since_reversal(t, np.array([-1, -1, -1, 1, 1, 1])), [0, 0.5, 1, 0, 0.5, 1])
+    np.testing.assert_array_equal(_time_since_reversal(t, np.ones(6)), t)
+
+
+def test_the_relaxation_signatures_see_a_decay_after_reversal_and_not_a_constant_split():
+    """A friction-like split that stays constant projects on neither relaxation signature (they are centred
+    within each half-cycle); a split that decays after each reversal, as a viscoelastic force does, is found
+    in the cycles where it is: near zero pressure by ``relaxation``, at the test pressure by
+    ``relaxation_at_load``. (Sixteen cycles: the transient sits in the first block of each half-cycle, so the
+    block sign-flip test's smallest p-value is set by the number of half-cycles.)"""
+    rng = np.random.default_rng(103)
+    cov = _cycle_covariates([0.0, 2e5] * 8)
+    n = cov.test.size
+    predicted = np.linspace(0, 30, n)
+    weights = signature_weights(cov, predicted)
+    for name in ("relaxation", "relaxation_at_load"):
+        assert signature_statistic(3.0 * cov.rate_sign, weights[name]) < 1e-9
+    decay = cov.rate_sign * np.exp(-cov.time_since_reversal_s / 4.0)
+    unloaded = cov.pressure_pa < 1e5
+    at_rest = diagnose(rng.normal(size=n) + np.where(unloaded, 2.0 * decay, 0.0), cov, predicted, seed=103)
+    assert at_rest.p_holm["relaxation"] < 0.01 and at_rest.p_value["relaxation_at_load"] > 0.05
+    loaded = diagnose(rng.normal(size=n) + np.where(unloaded, 0.0, 2.0 * decay), cov, predicted, seed=103)
+    assert loaded.p_holm["relaxation_at_load"] < 0.01 and loaded.p_value["relaxation"] > 0.05
 
 
 def test_wilson_interval_known_values():
@@ -464,7 +517,8 @@ def test_sensor_offset_and_gain_compete_with_physics_but_widening_noise_comes_la
 
 
 def test_a_significant_signature_reaches_every_candidate_the_registry_lists_for_it():
-    """A loading/unloading split significant after Holm gets hysteresis and relaxation refitted even when the
+    """A loading/unloading split significant after Holm gets hysteresis refitted (and a relaxation signature the
+    Maxwell branch) even when the
     one-step screen promised them nothing (from zero friction the gradient vanishes); a signature that is not
     significant adds nothing beyond the screen's top few; the report names each candidate's failed gates."""
     from types import SimpleNamespace
@@ -477,21 +531,21 @@ def test_a_significant_signature_reaches_every_candidate_the_registry_lists_for_
     quiet = {"loading_split": 0.2, "noise_level": 0.5, "force_level": 0.3}
     ranked, by_signature = refit_candidates(inactive, gain, quiet, gates)
     assert ranked == ["series_compliance", "sensor_offset", "session_baseline"] and by_signature == {}
-    loud = {**quiet, "loading_split": 1e-4, "noise_level": 0.003}
+    loud = {**quiet, "loading_split": 1e-4, "noise_level": 0.003, "relaxation": 0.002}
     ranked, by_signature = refit_candidates(inactive, gain, loud, gates)
-    assert ranked == ["series_compliance", "sensor_offset", "hysteresis", "viscoelastic_relaxation",
-                      "heteroscedastic_noise", "session_baseline"]
-    assert by_signature == {"loading_split": ["hysteresis", "viscoelastic_relaxation"],
-                            "noise_level": ["heteroscedastic_noise"]}
+    assert ranked == ["series_compliance", "sensor_offset", "hysteresis", "heteroscedastic_noise",
+                      "viscoelastic_relaxation", "session_baseline"]
+    assert by_signature == {"loading_split": ["hysteresis"], "noise_level": ["heteroscedastic_noise"],
+                            "relaxation": ["viscoelastic_relaxation"]}
     scored = [SimpleNamespace(name="hysteresis", evidence={"gates": {"parsimony": False, "identified": True}})]
     outcomes = signature_outcomes(by_signature, loud, scored)
-    assert outcomes["loading_split"] == {"p_holm": 1e-4, "candidates": {"hysteresis": ["parsimony"],
-                                                                          "viscoelastic_relaxation": None}}
+    assert outcomes["loading_split"] == {"p_holm": 1e-4, "candidates": {"hysteresis": ["parsimony"]}}
+    assert outcomes["relaxation"] == {"p_holm": 0.002, "candidates": {"viscoelastic_relaxation": None}}
     from peano_bayes.discovery.report import _signature_lines
 
     text = "\n".join(_signature_lines([outcomes]))
-    assert "round 1, `loading_split` (Holm p 0.0001): `hysteresis` (failed: parsimony); " in text
-    assert "`viscoelastic_relaxation` (its fit failed)" in text
+    assert "round 1, `loading_split` (Holm p 0.0001): `hysteresis` (failed: parsimony)" in text
+    assert "`relaxation` (Holm p 0.002): `viscoelastic_relaxation` (its fit failed)" in text
     assert _signature_lines([{}, {}]) == []
 
 

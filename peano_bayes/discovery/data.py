@@ -65,8 +65,10 @@ class Covariates:
     **Fields:** ``test`` (str); ``run`` run number in the dataset; ``block`` block id (runs split every
     :data:`BLOCK_BINS` bins); ``cycle`` cycle index; ``pressure_pa`` mean muscle (step: supply) pressure;
     ``strain`` mean strain (input of load cycles and blocking, observed in stroke and step) [-];
-    ``rate_sign`` sign of the commanded strain rate in load cycles (0 elsewhere); ``time_since_step_s``
-    (step runs; NaN elsewhere); ``session_s`` bin time plus the durations of the runs before it [s].
+    ``rate_sign`` sign of the commanded strain rate in load cycles (0 elsewhere); ``time_since_reversal_s``
+    time since the commanded strain last changed direction, or since the run began (load cycles; NaN
+    elsewhere) [s]; ``time_since_step_s`` (step runs; NaN elsewhere); ``session_s`` bin time plus the durations
+    of the runs before it [s].
     """
 
     test: np.ndarray
@@ -76,6 +78,7 @@ class Covariates:
     pressure_pa: np.ndarray
     strain: np.ndarray
     rate_sign: np.ndarray
+    time_since_reversal_s: np.ndarray
     time_since_step_s: np.ndarray
     session_s: np.ndarray
 
@@ -158,6 +161,14 @@ def _take(group: RunGroup, rows: np.ndarray, cycle: np.ndarray) -> RunGroup:
     )
 
 
+def _time_since_reversal(t: np.ndarray, rate_sign: np.ndarray) -> np.ndarray:
+    """Time [s] (m,) of each bin since the strain rate's sign last changed (or since the first bin)."""
+    start = np.zeros(t.size, dtype=int)
+    changed = np.flatnonzero(np.diff(rate_sign) != 0) + 1
+    start[changed] = changed
+    return t - t[np.maximum.accumulate(start)]
+
+
 def _covariates(groups, cycles, session_start: dict) -> Covariates:
     cols: dict[str, list] = {k: [] for k in Covariates.__dataclass_fields__}
     block_id = 0
@@ -179,6 +190,8 @@ def _covariates(groups, cycles, session_start: dict) -> Covariates:
             rate = np.sign(np.gradient(strain_in)) if group.test == "load_cycle" else np.zeros(m)
             cols["rate_sign"].append(rate)
             t = np.asarray(group.bin_time_s[i])
+            cycle_test = group.test == "load_cycle"
+            cols["time_since_reversal_s"].append(_time_since_reversal(t, rate) if cycle_test else np.full(m, np.nan))
             if group.test == "step":
                 supply = group.per_bin(np.asarray(group.supply_pa[i]), row=i).mean(axis=1)
                 edge = t[int(np.argmax(np.abs(np.diff(supply)))) + 1] if m > 1 else t[0]

@@ -40,6 +40,41 @@ def _centred(w: np.ndarray, where: np.ndarray) -> np.ndarray:
     return out
 
 
+#: Decay time of the relaxation signatures as a fraction of the half-cycle it decays in: a viscoelastic force
+#: that relaxes within a quarter of the time between strain reversals leaves its transient there.
+RELAXATION_FRACTION = 0.25
+#: Pressure, as a fraction of the highest in the data, from which a load cycle counts as loaded: a Maxwell branch
+#: across the tubes relaxes where the tubes move (cycles near zero pressure), a series element where the force
+#: is high (cycles at the test pressure).
+LOADED_PRESSURE = 0.5
+
+
+def decay_after_reversal(cov: Covariates) -> np.ndarray:
+    """Per bin (n,): in load cycles, the strain-rate sign times ``exp(-t / tau)`` of the time ``t`` since the
+    last strain reversal, minus its mean over that half-cycle (``tau`` a :data:`RELAXATION_FRACTION` of the
+    half-cycle's duration); zero elsewhere. Orthogonal, within every half-cycle, to a constant loading/unloading
+    split: it measures how the split **decays** after each reversal, the transient of a viscoelastic element
+    (a friction loop reaches its limit within a bin or two and adds a split that stays)."""
+    ts = cov.time_since_reversal_s
+    cycle = (cov.test == "load_cycle") & np.isfinite(ts)
+    out = np.zeros(ts.shape, dtype=float)
+    rows = np.flatnonzero(cycle)
+    if rows.size == 0:
+        return out
+    # a new half-cycle where the run changes or the time since the reversal restarts
+    new = np.ones(rows.size, dtype=bool)
+    new[1:] = (cov.run[rows][1:] != cov.run[rows][:-1]) | (ts[rows][1:] <= ts[rows][:-1])
+    segment = np.cumsum(new) - 1
+    for k in range(segment[-1] + 1):
+        idx = rows[segment == k]
+        duration = ts[idx].max()
+        if idx.size < 3 or duration <= 0:
+            continue
+        decay = np.exp(-ts[idx] / (RELAXATION_FRACTION * duration))
+        out[idx] = cov.rate_sign[idx] * (decay - decay.mean())
+    return out
+
+
 def signature_weights(cov: Covariates, predicted: np.ndarray) -> dict[str, np.ndarray]:
     """name -> weight vector (n,) of every signature, from covariates and the model's predicted signal (n,)."""
     test = cov.test
@@ -55,8 +90,11 @@ def signature_weights(cov: Covariates, predicted: np.ndarray) -> dict[str, np.nd
         if rows.size > 1:
             velocity[rows] = np.gradient(predicted[rows])
     low = (force & (test == "blocking")) | stroke
+    decay = decay_after_reversal(cov)
     weights = {
         "loading_split": np.where(cycle_force, cov.rate_sign, 0.0),
+        "relaxation": np.where(cycle_force & (p < LOADED_PRESSURE), decay, 0.0),
+        "relaxation_at_load": np.where(cycle_force & (p >= LOADED_PRESSURE), decay, 0.0),
         "force_level": _centred(np.abs(predicted), force),
         "blocking_pressure": _centred(p, test == "blocking"),
         "free_strain": np.where(stroke & (p > 0.2), 1.0 / np.maximum(p, 0.2), 0.0),
@@ -76,6 +114,8 @@ def signature_weights(cov: Covariates, predicted: np.ndarray) -> dict[str, np.nd
 SQUARED = frozenset({"noise_level"})
 SIGNATURES = (
     "loading_split",
+    "relaxation",
+    "relaxation_at_load",
     "force_level",
     "blocking_pressure",
     "free_strain",

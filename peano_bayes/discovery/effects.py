@@ -109,6 +109,9 @@ def _effect(name, meaning, kind, params, off, start, strength, signature, shows_
 #: Rigid-tube stand-in for "no tensile compliance": the upper bound of ``tensile_ka_n_per_m``. The ideal
 #: model's blocking force is infinite; a load cycle that stretches the muscle cannot be simulated without it.
 RIGID_TENSILE_N_PER_M = PARAMETERS["tensile_ka_n_per_m"].bounds[1]
+#: Rigid stand-in for "no series Kelvin unit": the upper bound of ``series_kelvin1_k_n_per_m``, at which its
+#: stretch is below 1e-12 m per newton.
+RIGID_KELVIN_N_PER_M = PARAMETERS["series_kelvin1_k_n_per_m"].bounds[1]
 #: Unrestricted inlet: the upper bound of ``orifice_area_m2`` (the pressure drop at step flows is < 1 Pa).
 OPEN_ORIFICE_M2 = PARAMETERS["orifice_area_m2"].bounds[1]
 
@@ -134,10 +137,24 @@ _LIST = (
         {"parallel_maxwell1_k_n_per_m": 0.0},
         {"parallel_maxwell1_k_n_per_m": 50.0, "parallel_maxwell1_tau_s": 1.0},
         ("parallel_maxwell1_k_n_per_m",),
-        "loading_split",
+        "relaxation",
         ("load_cycle",),
         {"parallel_maxwell1_tau_s": 1.0},
         model={"parallel_maxwell": 1},
+    ),
+    _effect(
+        "series_viscoelastic",
+        "a Kelvin-Voigt unit (spring and dashpot in parallel) in series with the tensile spring, the viscoelastic "
+        "structure the paper proposes: the film stretches late under a changing force",
+        "physics",
+        ("series_kelvin1_k_n_per_m", "series_kelvin1_tau_s"),
+        {"series_kelvin1_k_n_per_m": RIGID_KELVIN_N_PER_M},
+        {"series_kelvin1_k_n_per_m": 2e6, "series_kelvin1_tau_s": 1.0},
+        ("series_kelvin1_k_n_per_m",),
+        "relaxation_at_load",
+        ("load_cycle", "blocking"),
+        {"series_kelvin1_tau_s": 1.0},
+        model={"series_kelvin": 1},
     ),
     _effect(
         "series_compliance",
@@ -303,6 +320,11 @@ CONFUSABLE: MappingProxyType = MappingProxyType(
     {
         frozenset({"hysteresis", "viscoelastic_relaxation"}): "load cycles at two or more strain rates: "
         "a viscoelastic loop grows with rate, a friction loop does not",
+        frozenset({"hysteresis", "series_viscoelastic"}): "load cycles at two or more strain rates: "
+        "a viscoelastic loop grows with rate, a friction loop does not",
+        frozenset({"viscoelastic_relaxation", "series_viscoelastic"}): "strain holds at zero pressure and at the "
+        "test pressure: a branch across the tubes relaxes where the tubes move (zero pressure), an element in "
+        "series with the film where the force is high (test pressure)",
         frozenset({"flow_restriction", "nonlinear_damping"}): "isometric (blocked) steps as well as free steps: "
         "an inlet restriction delays the force of a blocked muscle, load damping does not",
         frozenset({"series_compliance", "tensile_stiffness"}): "the muscle's own strain measured on the muscle "

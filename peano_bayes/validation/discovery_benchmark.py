@@ -70,6 +70,10 @@ REFERENCE = {
         ("viscoelastic_relaxation",),
         lambda s: {"parallel_maxwell1_k_n_per_m": 500.0 * s, "parallel_maxwell1_tau_s": 2.0},
     ),
+    "series_viscoelastic": (
+        ("series_viscoelastic",),
+        lambda s: {"series_kelvin1_k_n_per_m": 2e4 / s, "series_kelvin1_tau_s": 2.0},
+    ),
     "series_compliance": (("series_compliance",), lambda s: {"mount_compliance_m_per_n": 1e-5 * s}),
     "strain_stiffening": (("strain_stiffening",), lambda s: {"extension_k_n_per_m": 200.0 * s, "extension_rate": 50.0}),
     "threshold_pressure": (("threshold_pressure",), lambda s: {"threshold_pressure_pa": 5e3 * s}),
