@@ -272,14 +272,18 @@ def with_path_samples(time_s: np.ndarray, nodes: np.ndarray, starts: np.ndarray)
     and where each node sits among them: ``(times (L,), node_index (p m,))``.
 
     The added samples are the run's first (a simulation starting at the first node would begin relaxed at a
-    later input than the run did) and the two around each segment start in ``starts`` (a path from the last
-    node before a strain reversal to the first after it cuts the corner and never reaches the extreme). The
-    friction state remembers both: in the bundled PC data at the generating values, leaving them out misfits
-    the blocking test by up to 0.19 N and the load cycle after its reversal by up to 0.07 N (bin sd 0.1 N).
-    Their predictions are simulated but not compared with data. A sample within a millionth of an interval of
-    a node is not added again."""
+    later input than the run did) and every sample within :data:`SNAP_SAMPLES` of each segment start in
+    ``starts`` (a path from the last node before a strain reversal to the first after it cuts the corner and
+    never reaches the extreme; a run binned like an earlier repeat turns within that window of the start, not
+    at it). The friction state remembers both: in the bundled PC data at the generating values, leaving them
+    out misfits the blocking test by up to 0.19 N and the load cycle after its reversal by up to 0.07 N (bin sd
+    0.1 N); with only the two samples at the start and repeats snapped to each other's starts, noise in the
+    strain alone moved PR's fitted friction limit by 2.5-3.6 of its conditional sd (virtual-rig seeds 11 and
+    12), against 0.1-1.4 with every sample simulated. Their predictions are simulated but not compared with
+    data. A sample within a millionth of an interval of a node is not added again."""
     time_s, nodes = np.asarray(time_s, dtype=float), np.asarray(nodes, dtype=float)
-    path = {0} | {int(i) for s in np.asarray(starts) if s > 0 for i in (s - 1, s) if 0 <= i < time_s.size}
+    window = range(-SNAP_SAMPLES - 1, SNAP_SAMPLES + 1)
+    path = {0} | {int(s + d) for s in np.asarray(starts) if s > 0 for d in window if 0 <= s + d < time_s.size}
     extra = time_s[sorted(path)]
     tolerance = 1e-6 * (float(np.min(np.diff(time_s))) if time_s.size > 1 else 1.0)
     near = np.min(np.abs(extra[:, None] - nodes[None, :]), axis=1) <= tolerance
@@ -360,17 +364,19 @@ def sample_times(time_s: np.ndarray, k: int) -> np.ndarray:
     return np.concatenate([time_s[:full], tail])
 
 
-#: Segmentations of two runs whose segment starts differ by at most this fraction of the run's samples are
-#: taken to be the same commanded protocol: the later run is binned like the earlier one (so repeats can share a
-#: simulation, :func:`_share_repeats`; the denoising places a reversal within a few samples of where it was).
-SNAP_FRACTION = 0.03
+#: Segmentations of two runs whose segment starts differ by at most this many samples are taken to be the same
+#: commanded protocol: the later run is binned like the earlier one (so repeats can share a simulation,
+#: :func:`_share_repeats`; the denoising places a reversal within a few samples of where it was). Each run's
+#: own turn then lies within this many samples of a start, and :func:`with_path_samples` simulates every
+#: sample of that window.
+SNAP_SAMPLES = 12
 
 
-def _snap(segments: np.ndarray, known: list, n: int) -> np.ndarray:
+def _snap(segments: np.ndarray, known: list) -> np.ndarray:
     """``segments``, or an earlier run's from ``known`` (updated) when every start is within
-    :data:`SNAP_FRACTION` of ``n`` samples of it."""
+    :data:`SNAP_SAMPLES` samples of it."""
     for other in known:
-        if other.shape == segments.shape and np.max(np.abs(other - segments)) <= max(2, SNAP_FRACTION * n):
+        if other.shape == segments.shape and np.max(np.abs(other - segments)) <= SNAP_SAMPLES:
             return other
     known.append(segments)
     return segments
@@ -395,7 +401,7 @@ def _reduce_run(
 ) -> dict:
     """One run binned by ``k`` samples, or (``per_segment``) into that many bins per segment of its denoised
     driving inputs (:func:`segment_bins`; segmentations of earlier runs of the protocol in ``known_segments``
-    reused, see :data:`SNAP_FRACTION`): simulation times and inputs (two per bin, :func:`quadrature_times`, or
+    reused, see :data:`SNAP_SAMPLES`): simulation times and inputs (two per bin, :func:`quadrature_times`, or
     with ``every_sample`` ``k`` per bin, :func:`sample_times`; plus the samples where the inputs' path turns,
     :func:`with_path_samples`, and ``bin_nodes`` locating the bins' points; driving inputs denoised), observed
     bin means, counts, and the raw noise sd of each driving input (for :func:`_share_repeats`); with
@@ -425,7 +431,7 @@ def _reduce_run(
             if fitted[name] is not None
         ]
         known = [] if known_segments is None else known_segments
-        starts = _snap(merge_adjacent(segment_starts(smooth)), known, n)
+        starts = _snap(merge_adjacent(segment_starts(smooth)), known)
         k = segment_bins(starts, n, per_segment)
     one_per_bin = np.ndim(k) == 0 and k == 1
     centre, _ = bin_means(run.time_s, k)
