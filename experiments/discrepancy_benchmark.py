@@ -11,9 +11,11 @@ tuned on. The tests use 100-199; every other seed below 12000 is spent (the runs
 ``experiments/``, e.g. ``git log --stat -- experiments/``). The committed final runs of the current workflow
 are ``discrepancy-10000/`` (seeds 10000-10021, SNR 2, the defaults) and ``discrepancy-11000/`` (seeds
 11000-11021, ``--snr 4``, the eight effects only), each with its ``PREREGISTRATION.md``. The second version of
-discovery (relaxation's own signature, the series viscoelastic effect) was tuned on seeds 20000-20001 and has
-its final run in ``discrepancy-12000/`` (seeds 12000-12039, 40 per case). A final run of any later workflow
-change starts at ``--first-seed 13000``; tuning seeds from 20002.
+discovery (relaxation's own signature, the series viscoelastic effect) was tuned on seeds 20000-20001. Its
+first pre-registered final run (seeds 12000-12039) was stopped after 31 rows (seeds 12000-12001), before any
+table, when the likelihood's path samples were found to cut the corner of a repeat's strain reversal (a47a391,
+which changes discovery's inputs too); those seeds are spent. The next final run starts at
+``--first-seed 13000``; tuning seeds from 20002.
 
 Runs are work units of ``peano_bayes.fanout`` (``--jobs`` local processes, or a Dask cluster with
 ``--scheduler``). Resumable: this process appends every finished run as one line of ``OUT/runs.jsonl``; a rerun
