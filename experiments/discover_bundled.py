@@ -32,6 +32,7 @@ GENERATING = {
     "extension": "strain_stiffening",
     "mount": "series_compliance",
     "parallel_maxwell": "viscoelastic_relaxation",
+    "series_kelvin": "series_viscoelastic",
     "threshold": "threshold_pressure",
 }
 #: Generating switches whose effect shows only in the step response, which is not used here.

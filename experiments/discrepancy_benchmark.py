@@ -13,8 +13,10 @@ are ``discrepancy-10000/`` (seeds 10000-10021, SNR 2, the defaults) and ``discre
 11000-11021, ``--snr 4``, the eight effects only), each with its ``PREREGISTRATION.md``. The second version of
 discovery (relaxation's own signature, the series viscoelastic effect) was tuned on seeds 20000-20001. Its
 first pre-registered final run (seeds 12000-12039) was stopped after 31 rows (seeds 12000-12001), before any
-table, when the likelihood's path samples were found to cut the corner of a repeat's strain reversal (a47a391,
-which changes discovery's inputs too); those seeds are spent. The next final run starts at
+table. The reason then given, that a47a391 changes discovery's inputs, was wrong (discovery bins by fixed counts
+and never snaps repeats); but a review then found the new effect's scored test out of the registry's order and
+two edge cases of the relaxation signatures, which the next commit fixes, so the run stays withdrawn and those
+seeds are spent. The next final run starts at
 ``--first-seed 13000``; tuning seeds from 20002.
 
 Runs are work units of ``peano_bayes.fanout`` (``--jobs`` local processes, or a Dask cluster with

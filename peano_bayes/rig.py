@@ -559,7 +559,8 @@ def simulate_dataset(
       ``damping_*`` values to have an effect). Names the configuration does not read are ignored.
     - ``config``: the model the data come from; ``quirks``: names of :data:`QUIRKS` (effects) whose elements
       are switched on in ``config`` (``series_compliance`` -> ``mount``, ``hysteresis`` -> Dahl friction,
-      ``viscoelastic_relaxation`` -> one parallel Maxwell branch, ``strain_stiffening`` -> ``extension``,
+      ``viscoelastic_relaxation`` -> one parallel Maxwell branch, ``series_viscoelastic`` -> one series
+      Kelvin-Voigt unit, ``strain_stiffening`` -> ``extension``,
       ``threshold_pressure`` -> ``threshold``, ``nonlinear_damping`` -> ``damping``).
     - ``seed``: every random draw derives from it; the same arguments give the same dataset, and the same bytes
       through :func:`peano_bayes.data.save`. Streams are keyed by (specimen, test, run), so a

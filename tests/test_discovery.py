@@ -276,6 +276,8 @@ def test_time_since_reversal_restarts_where_the_strain_turns():
     t = np.arange(6) * 0.5
     np.testing.assert_array_equal(_time_since_reversal(t, np.array([-1, -1, -1, 1, 1, 1])), [0, 0.5, 1, 0, 0.5, 1])
     np.testing.assert_array_equal(_time_since_reversal(t, np.ones(6)), t)
+    # a zero rate at the turn keeps the sign before it: the clock restarts once, at the new sign
+    np.testing.assert_array_equal(_time_since_reversal(t, np.array([-1, -1, 0, 1, 1, 1])), [0, 0.5, 1, 0, 0.5, 1])
 
 
 def test_the_relaxation_signatures_see_a_decay_after_reversal_and_not_a_constant_split():
@@ -291,6 +293,15 @@ def test_the_relaxation_signatures_see_a_decay_after_reversal_and_not_a_constant
     weights = signature_weights(cov, predicted)
     for name in ("relaxation", "relaxation_at_load"):
         assert signature_statistic(3.0 * cov.rate_sign, weights[name]) < 1e-9
+    # a half-cycle is classed by its median pressure: bins of a cycle at the boundary are not split between both
+    edge = _cycle_covariates([0.0, 1e5, 2e5])
+    edge = replace(edge, pressure_pa=edge.pressure_pa + np.tile([-100.0, 100.0], edge.test.size // 2))
+    split = signature_weights(edge, np.linspace(0, 30, edge.test.size))
+    middle = edge.run == 1
+    in_unloaded, in_loaded = (np.count_nonzero(split[k][middle]) for k in ("relaxation", "relaxation_at_load"))
+    assert min(in_unloaded, in_loaded) == 0 and max(in_unloaded, in_loaded) > 0
+    for name in ("relaxation", "relaxation_at_load"):
+        assert signature_statistic(3.0 * edge.rate_sign, split[name]) < 1e-9
     decay = cov.rate_sign * np.exp(-cov.time_since_reversal_s / 4.0)
     unloaded = cov.pressure_pa < 1e5
     at_rest = diagnose(rng.normal(size=n) + np.where(unloaded, 2.0 * decay, 0.0), cov, predicted, seed=103)

@@ -162,9 +162,15 @@ def _take(group: RunGroup, rows: np.ndarray, cycle: np.ndarray) -> RunGroup:
 
 
 def _time_since_reversal(t: np.ndarray, rate_sign: np.ndarray) -> np.ndarray:
-    """Time [s] (m,) of each bin since the strain rate's sign last changed (or since the first bin)."""
+    """Time [s] (m,) of each bin since the strain rate's sign last changed (or since the first bin). A bin of
+    zero rate (at a turn, or a hold) keeps the sign before it, so a reversal through a zero restarts the clock
+    once, at the first bin of the new sign."""
+    sign = np.asarray(rate_sign, dtype=float).copy()
+    for i in range(1, sign.size):
+        if sign[i] == 0:
+            sign[i] = sign[i - 1]
     start = np.zeros(t.size, dtype=int)
-    changed = np.flatnonzero(np.diff(rate_sign) != 0) + 1
+    changed = np.flatnonzero(np.diff(sign) != 0) + 1
     start[changed] = changed
     return t - t[np.maximum.accumulate(start)]
 

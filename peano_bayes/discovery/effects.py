@@ -86,7 +86,8 @@ class Effect:
         the test with the largest noisy gap: the first of ``shows_in``, which lists first, of the tests where the
         effect's signature appears, the one where it moves the noise-free signal most
         (``discovery_benchmark.snr_by_test`` at SNR 2: threshold pressure stroke 2.0 against blocking 1.5, a
-        mount blocking 1.3 against load cycle 1.0, cyclic softening blocking 0.6 against load cycle 0.5)."""
+        mount blocking 1.3 against load cycle 1.0, cyclic softening blocking 0.6 against load cycle 0.5, a series
+        Kelvin-Voigt unit blocking 2.0 against load cycle 1.9)."""
         return self.shows_in[0]
 
 
@@ -144,15 +145,15 @@ _LIST = (
     ),
     _effect(
         "series_viscoelastic",
-        "a Kelvin-Voigt unit (spring and dashpot in parallel) in series with the tensile spring, the viscoelastic "
-        "structure the paper proposes: the film stretches late under a changing force",
+        "a Kelvin-Voigt unit (spring and dashpot in parallel) in series with the tensile spring, the series element "
+        "of the viscoelastic structure the paper proposes: the film stretches late under a changing force",
         "physics",
         ("series_kelvin1_k_n_per_m", "series_kelvin1_tau_s"),
         {"series_kelvin1_k_n_per_m": RIGID_KELVIN_N_PER_M},
         {"series_kelvin1_k_n_per_m": 2e6, "series_kelvin1_tau_s": 1.0},
         ("series_kelvin1_k_n_per_m",),
         "relaxation_at_load",
-        ("load_cycle", "blocking"),
+        ("blocking", "load_cycle"),
         {"series_kelvin1_tau_s": 1.0},
         model={"series_kelvin": 1},
     ),
@@ -325,6 +326,8 @@ CONFUSABLE: MappingProxyType = MappingProxyType(
         frozenset({"viscoelastic_relaxation", "series_viscoelastic"}): "strain holds at zero pressure and at the "
         "test pressure: a branch across the tubes relaxes where the tubes move (zero pressure), an element in "
         "series with the film where the force is high (test pressure)",
+        frozenset({"series_viscoelastic", "series_compliance"}): "a constant force held on the muscle: a series "
+        "viscoelastic element keeps stretching after the force settles (creep), a mount does not",
         frozenset({"flow_restriction", "nonlinear_damping"}): "isometric (blocked) steps as well as free steps: "
         "an inlet restriction delays the force of a blocked muscle, load damping does not",
         frozenset({"series_compliance", "tensile_stiffness"}): "the muscle's own strain measured on the muscle "

@@ -19,7 +19,7 @@ samples (discovery uses this). The simulation runs at two points per
 bin (:func:`quadrature_times`) and their mean is compared with the bin mean: exact for any signal cubic in time
 within a bin. (Simulating once at the bin's mean input instead biased a stiffness by 1.5 %, several posterior
 sd, on virtual-rig data.) The friction state remembers the path, so the simulation also passes through the run's
-first sample and, with segment bins, both samples of each turn of the inputs (:func:`with_path_samples`); their
+first sample and, with segment bins, the samples around each turn of the inputs (:func:`with_path_samples`); their
 predictions are not compared with data. The step response is not binned by default (its dynamics need every
 sample).
 
@@ -272,17 +272,18 @@ def with_path_samples(time_s: np.ndarray, nodes: np.ndarray, starts: np.ndarray)
     and where each node sits among them: ``(times (L,), node_index (p m,))``.
 
     The added samples are the run's first (a simulation starting at the first node would begin relaxed at a
-    later input than the run did) and every sample within :data:`SNAP_SAMPLES` of each segment start in
-    ``starts`` (a path from the last node before a strain reversal to the first after it cuts the corner and
+    later input than the run did) and every sample within :data:`SNAP_SAMPLES` (plus one) of each segment
+    start in ``starts`` (a path from the last node before a strain reversal to the first after it cuts the corner and
     never reaches the extreme; a run binned like an earlier repeat turns within that window of the start, not
     at it). The friction state remembers both: in the bundled PC data at the generating values, leaving them
     out misfits the blocking test by up to 0.19 N and the load cycle after its reversal by up to 0.07 N (bin sd
     0.1 N); with only the two samples at the start and repeats snapped to each other's starts, noise in the
-    strain alone moved PR's fitted friction limit by 2.5-3.6 of its conditional sd (virtual-rig seeds 11 and
+    strain alone moved PR's fitted friction limit by 2.5-4.1 of its conditional sd (virtual-rig seeds 11 and
     12), against 0.1-1.4 with every sample simulated. Their predictions are simulated but not compared with
     data. A sample within a millionth of an interval of a node is not added again."""
     time_s, nodes = np.asarray(time_s, dtype=float), np.asarray(nodes, dtype=float)
-    window = range(-SNAP_SAMPLES - 1, SNAP_SAMPLES + 1)
+    # a turn at start s runs from sample s to s + 1 (segment_starts marks the sample after which the input bends)
+    window = range(-SNAP_SAMPLES - 1, SNAP_SAMPLES + 2)
     path = {0} | {int(s + d) for s in np.asarray(starts) if s > 0 for d in window if 0 <= s + d < time_s.size}
     extra = time_s[sorted(path)]
     tolerance = 1e-6 * (float(np.min(np.diff(time_s))) if time_s.size > 1 else 1.0)
@@ -368,7 +369,9 @@ def sample_times(time_s: np.ndarray, k: int) -> np.ndarray:
 #: commanded protocol: the later run is binned like the earlier one (so repeats can share a simulation,
 #: :func:`_share_repeats`; the denoising places a reversal within a few samples of where it was). Each run's
 #: own turn then lies within this many samples of a start, and :func:`with_path_samples` simulates every
-#: sample of that window.
+#: sample of that window. A count of samples, not a time: at a higher sampling rate the denoised reversals of
+#: repeats lie more samples apart, fewer repeats are binned alike and share a simulation (more cost, the same
+#: accuracy); measured at 20 Hz only.
 SNAP_SAMPLES = 12
 
 
