@@ -18,6 +18,7 @@ with NumPy, and builds the dataset. Write it with :func:`peano_bayes.data.save`.
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import json
 import math
@@ -516,10 +517,6 @@ def _fields(obj) -> dict:
     return {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)}
 
 
-#: Conditions per test of one mount's protocol (load cycles at 0 kPa and at the test pressure).
-_CONDITIONS = {"load_cycle": 2, "blocking": 1, "stroke": 1, "step": 1}
-
-
 def _check_mounts(added_compliances) -> tuple[float, ...]:
     mounts = tuple(added_compliances)
     if not 1 <= len(mounts) <= 4 or not all(
@@ -604,19 +601,21 @@ def simulate_dataset(
         label = string.ascii_uppercase[index]
         own = specimen_parameters(params, specimen_spread, np.random.default_rng([seed, _SPECIMEN_STREAM, index]))
         per_specimen[label] = own
-        truths = []
-        for k, added in enumerate(mounts):
+        truths, earlier = [], collections.Counter()  # conditions per test on the mounts before
+        for added in mounts:
             mounted = dict(own)
             if added > 0:
                 mounted["mount_compliance_m_per_n"] = own["mount_compliance_m_per_n"] + added
+            batch = _specimen_truths(mounted, spec, final_config, protocol, tests, report, label)
             truths += [
                 dataclasses.replace(
                     t,
-                    condition=t.condition + k * _CONDITIONS[t.test],
+                    condition=t.condition + earlier[t.test],
                     added_compliance_m_per_n=added if mounts != (0.0,) else None,
                 )
-                for t in _specimen_truths(mounted, spec, final_config, protocol, tests, report, label)
+                for t in batch
             ]
+            earlier.update(t.test for t in batch)
         runs += _session_runs(label, index, truths, seed=seed, noise=noise, repeats=repeats, drift=drift)
     return Dataset(
         material=spec.data_material(),
