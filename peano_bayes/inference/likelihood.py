@@ -279,7 +279,7 @@ def with_path_samples(time_s: np.ndarray, nodes: np.ndarray, starts: np.ndarray)
     out misfits the blocking test by up to 0.19 N and the load cycle after its reversal by up to 0.07 N (bin sd
     0.1 N); with only the two samples at the start and repeats snapped to each other's starts, noise in the
     strain alone moved PR's fitted friction limit by 2.5-4.1 of its conditional sd (virtual-rig seeds 11 and
-    12), against 0.1-1.4 with every sample simulated. Their predictions are simulated but not compared with
+    12), against 0.1-1.6 with every sample simulated. Their predictions are simulated but not compared with
     data. A sample within a millionth of an interval of a node is not added again."""
     time_s, nodes = np.asarray(time_s, dtype=float), np.asarray(nodes, dtype=float)
     # a turn at start s runs from sample s to s + 1 (segment_starts marks the sample after which the input bends)
