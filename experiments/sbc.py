@@ -1,7 +1,8 @@
 """Simulation-based calibration of the inference chain: coverage table and rank histograms.
 
     python experiments/sbc.py [--replicates 100] [--out experiments/sbc] [--seed 20261123] [--walkers 16]
-                              [--exact-inputs] [--jobs N | --scheduler local:N | --scheduler tcp://HOST:8786]
+                              [--exact-inputs] [--specimens N]
+                              [--jobs N | --scheduler local:N | --scheduler tcp://HOST:8786]
 
 Each replicate draws parameters from the prior, runs the virtual rig with them and infers them with the same
 posterior-mode start and emcee sampler as ``peano-bayes fit`` (see ``peano_bayes.validation.sbc`` for the
@@ -11,7 +12,9 @@ rewritten atomically at the end. Replicates are work units of ``peano_bayes.fano
 processes, or a Dask cluster with ``--scheduler``); this process alone appends their rows, and the summary is
 ordered by replicate index, so it is the same however the replicates were spread. ``--exact-inputs`` runs the
 same study with noiseless strain and pressure sensors (a control: the likelihood treats the denoised inputs as
-exact, so the gap between the two studies' coverage is what the inputs' fitting error costs). Target: 90 %
+exact, so the gap between the two studies' coverage is what the inputs' fitting error costs). ``--specimens 2``
+runs the hierarchical study: two specimens with their own values, the spread and contrasts sampled, and the
+population and new-specimen levels ranked beside theta. Target: 90 %
 intervals cover 85-95 % of the truths. The last line printed is one JSON object.
 """
 
@@ -41,14 +44,15 @@ from peano_bayes.validation.sbc import (
 TARGET = (0.85, 0.95)
 
 
-def load_done(path: Path, seed: int, exact_inputs: bool = False) -> dict[int, dict]:
-    """Finished replicates of the study (``seed``, ``exact_inputs``) in ``path``, by index."""
+def load_done(path: Path, seed: int, exact_inputs: bool = False, specimens: int = 1) -> dict[int, dict]:
+    """Finished replicates of the study (``seed``, ``exact_inputs``, ``specimens``) in ``path``, by index."""
     done = {}
     if path.exists():
         for line in path.read_text().splitlines():
             if line.strip():
                 row = json.loads(line)
-                if row.get("seed") == seed and row.get("exact_inputs", False) == exact_inputs:
+                same = (row.get("seed"), row.get("exact_inputs", False), row.get("specimens", 1))
+                if same == (seed, exact_inputs, specimens):
                     done[row["index"]] = row
     return done
 
@@ -60,14 +64,23 @@ def append_line(path: Path, row: dict) -> None:
         os.fsync(fh.fileno())
 
 
-def markdown(rows: list[dict], replicates: list[dict], seed: int, seconds: float, exact_inputs: bool = False) -> str:
+def markdown(
+    rows: list[dict], replicates: list[dict], seed: int, seconds: float, exact_inputs: bool = False, specimens: int = 1
+) -> str:
     n = len(replicates)
     converged = sum(r["converged"] for r in replicates)
+    hierarchy = (
+        f"; {specimens} specimens with their own values of the parameters that differ between specimens, the "
+        "spread and the specimens' contrasts sampled, and the population and new-specimen levels ranked beside "
+        "them"
+        if specimens > 1
+        else ""
+    )
     lines = [
         "# Simulation-based calibration",
         "",
         f"{n} replicates (root seed {seed}), TP load cycles, three free physics parameters and the load cell's "
-        f"noise scale (`peano_bayes.validation.sbc`). Each replicate: truth from the prior, data from the "
+        f"noise scale{hierarchy} (`peano_bayes.validation.sbc`). Each replicate: truth from the prior, data from the "
         f"virtual rig{' with noiseless strain and pressure sensors (exact inputs)' if exact_inputs else ''}, "
         f"posterior-mode start from the prior median, emcee to the convergence gates "
         f"({converged} of {n} converged; the rest stopped at the step limit and are counted as they are). "
@@ -116,20 +129,26 @@ def main(argv=None) -> int:
     parser.add_argument("--walkers", type=int, default=16)
     parser.add_argument("--max-steps", type=int, default=4000)
     parser.add_argument("--exact-inputs", action="store_true", help="noiseless strain and pressure sensors")
+    parser.add_argument("--specimens", type=int, default=1, help="specimens per replicate (2+: the hierarchy)")
     parser.add_argument("--jobs", type=int, default=1, help="local worker processes (default 1: this process)")
     parser.add_argument("--scheduler", default=None, help="Dask scheduler: local:N or tcp://HOST:8786")
     args = parser.parse_args(argv)
-    if args.replicates < 1 or args.walkers < 4 or args.max_steps < 1 or args.jobs < 1:
-        print("sbc.py: error: --replicates, --max-steps, --jobs >= 1 and --walkers >= 4 are required", file=sys.stderr)
+    if args.replicates < 1 or args.walkers < 4 or args.max_steps < 1 or args.jobs < 1 or args.specimens < 1:
+        print(
+            "sbc.py: error: --replicates, --max-steps, --jobs, --specimens >= 1 and --walkers >= 4 are required",
+            file=sys.stderr,
+        )
         return 2
     args.out.mkdir(parents=True, exist_ok=True)
     lines = args.out / "replicates.jsonl"
-    done = load_done(lines, args.seed, args.exact_inputs)
+    done = load_done(lines, args.seed, args.exact_inputs, args.specimens)
     t0 = time.perf_counter()
     todo = [i for i in range(args.replicates) if i not in done]
     if done:
         print(f"resuming: {len(done)} replicates already in {lines}")
     settings = dict(seed=args.seed, n_walkers=args.walkers, max_steps=args.max_steps, exact_inputs=args.exact_inputs)
+    if args.specimens > 1:
+        settings["specimens"] = args.specimens
     units = [Unit(f"replicate {i}", replicate_unit, (i,), settings) for i in todo]
 
     def finished(outcome):
@@ -150,17 +169,18 @@ def main(argv=None) -> int:
     raise_failures(outcomes, "replicate")
     replicates = [done[i] for i in range(args.replicates)]
     # theta's entries, as the rows name them (rows of earlier studies do not: then from the posterior itself)
-    names = replicates[0].get("names") or list(base_posterior().names)
+    names = replicates[0].get("names") or list(base_posterior(args.specimens).names)
     rows = coverage_table(replicates, names)
     seconds = time.perf_counter() - t0 + sum(r["seconds"] for r in replicates if r["index"] not in todo)
     flat = [{k: (json.dumps(v) if isinstance(v, list) else v) for k, v in row.items()} for row in rows]
     write_text(args.out / "coverage.csv", pd.DataFrame(flat).to_csv(index=False))
-    write_text(args.out / "SBC.md", markdown(rows, replicates, args.seed, seconds, args.exact_inputs))
+    write_text(args.out / "SBC.md", markdown(rows, replicates, args.seed, seconds, args.exact_inputs, args.specimens))
     rank_figure(replicates, names, args.out / "ranks")
     print((args.out / "SBC.md").read_text())
     summary = {
         "replicates": len(replicates),
         "exact_inputs": args.exact_inputs,
+        "specimens": args.specimens,
         "converged": int(sum(r["converged"] for r in replicates)),
         "coverage_90": {r["parameter"]: r["coverage_0.9"] for r in rows},
         "within_target": all(TARGET[0] <= r["coverage_0.9"] <= TARGET[1] for r in rows),

@@ -24,7 +24,7 @@ import json
 import math
 import string
 import tomllib
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
@@ -500,6 +500,28 @@ def _check_run(seed, repeats, specimens, tests, specimen_spread) -> tuple[int, i
     return checked
 
 
+def _check_specimen_values(specimen_values, specimens: int) -> list[dict[str, float]]:
+    """The checked per-specimen overrides of :func:`simulate_dataset` (empty mappings when none are given)."""
+    if specimen_values is None:
+        return [{}] * specimens
+    values = list(specimen_values)
+    if len(values) != specimens:
+        raise PeanoBayesInputError(
+            f"specimen_values: expected one mapping per specimen ({specimens}), got {len(values)}"
+        )
+    checked = []
+    for index, mapping in enumerate(values):
+        if not isinstance(mapping, Mapping):
+            raise PeanoBayesInputError(
+                f"specimen_values[{index}]: expected a mapping of parameter name to value, got {type(mapping).__name__}"
+            )
+        try:
+            checked.append({name: check_parameter(name, value) for name, value in mapping.items()})
+        except PeanoBayesInputError as err:
+            raise PeanoBayesInputError(f"specimen_values[{index}]: {err}") from None
+    return checked
+
+
 def _session_runs(label: str, index: int, truths, *, seed: int, noise: RigNoise, repeats: int, drift: bool):
     """Specimen ``label``'s measured runs: ``repeats`` noisy repeats of each noise-free truth, in session order
     (noise streams keyed by specimen ``index``, test and run number; drift grows over the session)."""
@@ -544,6 +566,7 @@ def simulate_dataset(
     protocol: RigProtocol = DEFAULT_PROTOCOL,
     progress: Callable[[str], None] | None = None,
     added_compliances: Iterable[float] = (0.0,),
+    specimen_values: Sequence[Mapping[str, float]] | None = None,
 ) -> Dataset:
     """Run the paper's test protocol on virtual specimens of a material; return the rig dataset.
 
@@ -574,6 +597,10 @@ def simulate_dataset(
       ``added_compliance_m_per_n``; run numbers continue across mounts (the second mount's load cycles at
       0 kPa are runs ``2 repeats .. 3 repeats-1``). A positive one switches the mount element on (the
       specimen's own mount then defaults to 0, rigid).
+    - ``specimen_values``: one mapping per specimen (``specimens`` of them) of parameter values [SI] that
+      specimen has, replacing its drawn value of each name given (for studies that draw the specimens
+      themselves, such as the hierarchical simulation-based calibration); every name and value is checked as
+      in ``true_params``.
 
     **Returns:** a :class:`~peano_bayes.data.Dataset` on :data:`~peano_bayes.physics.PAPER_GEOMETRY`. Load cycle
     runs ``0 .. repeats-1`` are at 0 kPa, ``repeats .. 2 repeats-1`` at the test pressure. ``force_n`` is NaN in
@@ -594,12 +621,14 @@ def simulate_dataset(
         true_params = {"mount_compliance_m_per_n": PARAMETERS["mount_compliance_m_per_n"].off, **(true_params or {})}
     params, fallback = resolve_parameters(true_params, final_config)
     seed, repeats, specimens, tests = _check_run(seed, repeats, specimens, tests, specimen_spread)
+    overrides = _check_specimen_values(specimen_values, specimens)
     report = progress or (lambda line: None)
 
     runs, per_specimen = [], {}
     for index in range(specimens):
         label = string.ascii_uppercase[index]
         own = specimen_parameters(params, specimen_spread, np.random.default_rng([seed, _SPECIMEN_STREAM, index]))
+        own.update({k: v for k, v in overrides[index].items() if k in own})
         per_specimen[label] = own
         truths, earlier = [], collections.Counter()  # conditions per test on the mounts before
         for added in mounts:

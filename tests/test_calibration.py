@@ -10,6 +10,9 @@ from peano_bayes.validation.sbc import (
     RANK_DRAWS,
     base_posterior,
     coverage_table,
+    derived_levels,
+    draw_truth,
+    rank_names,
     run_replicate,
     wilson_interval,
 )
@@ -60,3 +63,43 @@ def test_sbc_replicates_share_one_compiled_posterior_and_report_ranks_and_covera
         assert row["replicates"] == 2
         for level in LEVELS:
             assert row[f"coverage_{level:g}"] == sum(r["covered"][str(level)][j] for r in reps) / 2
+
+
+def test_hierarchical_sbc_draws_its_truths_by_the_posteriors_own_prior_and_ranks_the_derived_levels():
+    """The hierarchical study (``--specimens 2``): a truth's contrasts are N(0, spread^2), each specimen's
+    values are the sampled value (their geometric mean) moved by its Helmert offset, and the population and
+    new-specimen levels it ranks follow :meth:`Posterior.levels` (population = m exp(-spread z_bar), z_bar ~
+    N(0, 1/2); new specimen = population exp(spread z))."""
+    base = base_posterior(2)
+    assert set(base.varying) == {"tensile_ka_n_per_m", "bending_k1_n"}  # the free parameters that differ
+    names = rank_names(base)
+    assert names[: base.ndim] == base.names and base.n_contrasts == 2
+    assert names[base.ndim :] == tuple(
+        f"{level}__{p}" for p in base.varying for level in ("population", "new_specimen")
+    )
+    rng = np.random.default_rng(3)
+    z = []
+    for i in range(1500):
+        theta, values = draw_truth(base, rng)
+        spread = float(base.prior.from_unconstrained(theta[: base.prior.ndim])["specimen_log_sd"])
+        contrasts = theta[base.prior.ndim :]
+        z.append(contrasts / spread)
+        if i >= 50:
+            continue
+        params = base.params(theta)
+        for j, p in enumerate(base.varying):
+            a, b = values[0][p], values[1][p]
+            np.testing.assert_allclose(np.sqrt(a * b), float(params[p]), rtol=1e-12)  # geometric mean
+            np.testing.assert_allclose(np.log(b / a), np.sqrt(2.0) * contrasts[j], rtol=1e-10)
+    z = np.array(z)
+    np.testing.assert_allclose(z.mean(axis=0), 0.0, atol=0.08)  # 3.5 standard errors of 1500 normals
+    np.testing.assert_allclose(z.std(axis=0), 1.0, atol=0.06)
+    thetas = np.repeat(theta[None], 4000, axis=0)
+    levels = derived_levels(base, thetas, np.random.default_rng(4))
+    assert levels.shape == (4000, len(names))
+    np.testing.assert_array_equal(levels[:, : base.ndim], thetas)
+    for j, p in enumerate(base.varying):
+        log_m = np.log(float(base.params(theta)[p]))
+        population, new = levels[:, base.ndim + 2 * j], levels[:, base.ndim + 2 * j + 1]
+        np.testing.assert_allclose(np.std(population - log_m), spread / np.sqrt(2.0), rtol=0.05)
+        np.testing.assert_allclose(np.std(new - population), spread, rtol=0.05)

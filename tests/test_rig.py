@@ -141,6 +141,23 @@ def test_specimens_differ():
     np.testing.assert_array_equal(same.runs[0].force_n, same.runs[1].force_n)
 
 
+def test_specimen_values_set_each_specimens_own_parameters():
+    kwargs = dict(seed=5, specimens=2, repeats=1, tests=["blocking"], noise=QUIET, specimen_spread=0)
+    own = simulate_dataset(
+        "FC", {"tensile_ka_n_per_m": 3e4}, specimen_values=[{}, {"tensile_ka_n_per_m": 2e4}], **kwargs
+    )
+    params = json.loads(own.provenance["specimen_parameters"])
+    assert (params["A"]["tensile_ka_n_per_m"], params["B"]["tensile_ka_n_per_m"]) == (3e4, 2e4)
+    # specimen B is, signal for signal, a one-specimen session of its own value
+    alone = simulate_dataset("FC", {"tensile_ka_n_per_m": 2e4}, **{**kwargs, "specimens": 1})
+    np.testing.assert_array_equal(own.runs[1].force_n, alone.runs[0].force_n)
+    assert not np.array_equal(own.runs[0].force_n, own.runs[1].force_n)
+    with pytest.raises(PeanoBayesInputError, match=r"one mapping per specimen \(2\), got 1"):
+        simulate_dataset("FC", specimen_values=[{}], **kwargs)
+    with pytest.raises(PeanoBayesInputError, match=r"specimen_values\[1\]: parameter 'bending_k1_n'.*bounds"):
+        simulate_dataset("FC", specimen_values=[{}, {"bending_k1_n": -1.0}], **kwargs)
+
+
 def test_series_compliance_lowers_blocking_force():
     kwargs = dict(seed=2, specimens=1, repeats=1, tests=["blocking"])
     stiff = simulate_dataset("FC", **kwargs).runs[0]

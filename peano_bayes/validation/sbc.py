@@ -7,9 +7,18 @@ it. Over many replicates the ranks of a calibrated inference are uniform and a 9
 the truths. Every replicate shares one compiled log posterior (:meth:`Posterior.with_observations`), so a
 study of hundreds of datasets compiles once.
 
-The problem is deliberately reduced so a study of 100+ replicates runs in minutes: TP load cycles (one
-specimen, one repeat, at 0 kPa and the test pressure), three free model parameters (:data:`SBC_FREE`) and
-the load cell's noise scale; the rest at nominal values.
+The problem is deliberately reduced so a study of 100+ replicates runs in an hour or two: TP load cycles (one
+repeat per specimen, at 0 kPa and the test pressure), three free model parameters (:data:`SBC_FREE`) and the
+load cell's noise scale; the rest at nominal values.
+
+**Specimens.** With one specimen (the default) theta is the prior's parameters. With ``specimens >= 2`` the
+study is the specimen hierarchy of :mod:`peano_bayes.inference.posterior`: the prior adds the spread
+``specimen_log_sd`` and theta the specimens' log contrasts of each free parameter that differs between
+specimens, drawn ``N(0, spread^2)`` as the posterior's own prior says; each specimen is simulated with its own
+values (``simulate_dataset(specimen_values=...)``). Beside theta the study ranks the two derived levels a
+designer reads (:meth:`Posterior.levels`): the **population** value ``mu = m exp(-spread z_bar)``,
+``z_bar ~ N(0, 1/n)``, and a **new specimen** ``mu exp(spread z_new)``, each truth drawn by that same rule, so
+their ranks are uniform exactly when the levels' computation is calibrated too.
 """
 
 from __future__ import annotations
@@ -23,7 +32,7 @@ from scipy import stats
 
 from ..inference.laplace import posterior_mode, refine_mode
 from ..inference.likelihood import prepare
-from ..inference.posterior import Posterior, build_posterior
+from ..inference.posterior import SPECIMEN_SD, Posterior, build_posterior
 from ..inference.priors import prior_for
 from ..inference.sample import sample
 from ..physics import DEFAULT_CONFIG
@@ -38,11 +47,12 @@ LEVELS = (0.5, 0.9, 0.94)
 RANK_DRAWS = 99
 
 
-def simulate(params: dict, seed: int, exact_inputs: bool = False):
+def simulate(params: dict, seed: int, exact_inputs: bool = False, specimen_values=None):
     """The SBC protocol's rig dataset from model and noise parameters [SI] (``NOISE_NAME`` sets the load
     cell's noise; the other sensors keep the rig's defaults, or with ``exact_inputs`` the strain and pressure
-    sensors are noiseless, so the denoised driving inputs are exact)."""
-    model = {k: v for k, v in params.items() if k != NOISE_NAME}
+    sensors are noiseless, so the denoised driving inputs are exact). ``specimen_values``: one mapping of
+    parameter values per specimen (default one specimen, ``params`` itself)."""
+    model = {k: v for k, v in params.items() if k not in (NOISE_NAME, SPECIMEN_SD)}
     noise = RigNoise(force_sd_n=float(params[NOISE_NAME]))
     if exact_inputs:
         noise = replace(noise, strain_sd=0.0, pressure_sd_pa=0.0)
@@ -50,27 +60,67 @@ def simulate(params: dict, seed: int, exact_inputs: bool = False):
         SBC_MATERIAL,
         model,
         seed=seed,
-        specimens=1,
+        specimens=1 if specimen_values is None else len(specimen_values),
         repeats=1,
         specimen_spread=0.0,
+        specimen_values=specimen_values,
         tests=("load_cycle",),
         noise=noise,
     )
 
 
-def base_posterior() -> Posterior:
-    """The SBC posterior (on data at the prior median; replicates swap the data in)."""
+def base_posterior(specimens: int = 1) -> Posterior:
+    """The SBC posterior of ``specimens`` specimens (on data at the prior median; replicates swap the data
+    in). With two or more it is hierarchical (see the module docstring)."""
+    if specimens < 1:
+        raise ValueError(f"specimens must be >= 1, got {specimens}")
     prior = prior_for(SBC_MATERIAL)
     fixed = {k: v for k, v in DEFAULT_CONFIG.nominal_parameters().items() if k not in SBC_FREE}
     median = {**fixed, **{k: v for k, v in prior.median().items() if k in (*SBC_FREE, NOISE_NAME)}}
-    data = simulate(median, seed=0)
+    data = simulate(median, seed=0, specimen_values=None if specimens == 1 else [{}] * specimens)
     return build_posterior(prepare(data), prior, config=DEFAULT_CONFIG, fixed=fixed)
+
+
+def rank_names(base: Posterior) -> tuple[str, ...]:
+    """The quantities a replicate ranks: theta's entries, then (hierarchical study) ``population__<p>`` and
+    ``new_specimen__<p>`` of each parameter ``p`` that differs between specimens."""
+    derived = tuple(f"{level}__{p}" for p in base.varying for level in ("population", "new_specimen"))
+    return base.names + derived
+
+
+def draw_truth(base: Posterior, rng: np.random.Generator) -> tuple[np.ndarray, list[dict] | None]:
+    """A truth from the posterior's own prior: theta (D,) and, with several specimens, each specimen's values
+    of the varying parameters [SI] (``None`` with one specimen)."""
+    u = base.prior.sample(rng, 1)[0]
+    if not base.n_contrasts:
+        return u, None
+    spread = float(base.prior.from_unconstrained(u)[SPECIMEN_SD])
+    theta = np.concatenate([u, spread * rng.standard_normal(base.n_contrasts)])
+    params = base.params(theta)
+    offsets = {k: np.asarray(v) for k, v in base.offsets(theta).items()}
+    n = len(base.observations.specimens)
+    return theta, [{p: float(params[p]) * float(np.exp(offsets[p][s])) for p in base.varying} for s in range(n)]
+
+
+def derived_levels(base: Posterior, thetas: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """(n, len(rank_names)) theta and the derived levels of ``thetas`` (n, D), as :func:`rank_names` orders
+    them (log of the derived values, so they rank as the unconstrained entries do)."""
+    if not base.varying:
+        return thetas
+    levels = base.levels(thetas, rng)
+    derived = [
+        np.log(levels[p if level == "population" else f"new_specimen__{p}"])
+        for p in base.varying
+        for level in ("population", "new_specimen")
+    ]
+    return np.column_stack([thetas, *derived])
 
 
 @dataclass(frozen=True)
 class Replicate:
-    """One SBC replicate: ``index``; ``truth`` (D,) theta; ``rank`` (D,) of the truth among
-    :data:`RANK_DRAWS` thinned draws; ``covered`` level -> (D,) bool; ``converged``; ``steps``; ``tau_max``;
+    """One SBC replicate: ``index``; ``truth`` (K,) the ranked quantities of :func:`rank_names` (theta, plus the
+    derived levels in the hierarchical study); ``rank`` (K,) of the truth among :data:`RANK_DRAWS` thinned
+    draws; ``covered`` level -> (K,) bool; ``converged``; ``steps``; ``tau_max``;
     ``seconds``; ``redraws`` prior draws the rig could not simulate before this one."""
 
     index: int
@@ -106,10 +156,12 @@ def run_replicate(
     prior = base.prior
     redraws = 0
     while True:
-        truth = prior.sample(rng, 1)[0]
-        params = {**base.fixed, **{k: float(v) for k, v in prior.from_unconstrained(truth).items()}}
+        theta, specimen_values = draw_truth(base, rng)
+        params = {**base.fixed, **{k: float(v) for k, v in prior.from_unconstrained(theta[: prior.ndim]).items()}}
         try:
-            data = simulate(params, seed=int(rng.integers(2**31)), exact_inputs=exact_inputs)
+            data = simulate(
+                params, seed=int(rng.integers(2**31)), exact_inputs=exact_inputs, specimen_values=specimen_values
+            )
             break
         except RigSimulationError:  # the rig refuses a simulation whose solver misses its tolerance
             redraws += 1
@@ -119,8 +171,12 @@ def run_replicate(
         posterior = base.with_observations(prepare(data))
     except ValueError:  # the replicate's inputs were cut into other segments (other bin shapes): its own
         posterior = replace(base, observations=prepare(data))
-    start = np.asarray(prior.median_unconstrained())
-    spread = np.std(prior.sample(np.random.default_rng(0), 2000), axis=0)
+    draws = prior.sample(np.random.default_rng(0), 2000)
+    start = np.concatenate([np.asarray(prior.median_unconstrained()), np.zeros(base.n_contrasts)])
+    spread = np.std(draws, axis=0)
+    if base.n_contrasts:  # contrasts start at 0 with the prior's marginal sd of one, spread * N(0, 1)
+        sd = np.asarray(prior.from_unconstrained(draws)[SPECIMEN_SD]) * np.random.default_rng(1).standard_normal(2000)
+        spread = np.concatenate([spread, np.full(base.n_contrasts, np.std(sd))])
     posterior = posterior.with_batch_rows(n_walkers // 2)  # the sampler's batch size: one compilation
     laplace = refine_mode(posterior.batched, posterior_mode(posterior, start, np.diag(spread**2)))
     result = sample(
@@ -136,6 +192,11 @@ def run_replicate(
         log=lambda message: None,
     )
     draws = result.kept().reshape(-1, posterior.ndim)
+    if base.varying:  # the derived truths by the levels' own rule, from the replicate's stream
+        truth = derived_levels(base, theta[None], rng)[0]
+        draws = derived_levels(base, draws, rng)
+    else:
+        truth = theta
     thinned = draws[np.linspace(0, len(draws) - 1, RANK_DRAWS).round().astype(int)]
     rank = (thinned < truth).sum(axis=0)
     covered = {}
@@ -156,20 +217,22 @@ def run_replicate(
 
 
 @functools.cache
-def _process_base() -> Posterior:
-    return base_posterior()
+def _process_base(specimens: int = 1) -> Posterior:
+    return base_posterior(specimens)
 
 
 def replicate_unit(index: int, *, seed: int, **settings) -> dict:
     """Replicate ``index`` as a work unit of :func:`peano_bayes.fanout.run_units`: :func:`run_replicate` with
-    ``settings`` (its keyword arguments) on the base posterior, built once per process (so every replicate a
-    worker runs shares its compiled log posterior). The result is a JSON-ready row: ``seed``, ``exact_inputs``,
-    ``names`` (theta's entries, the order of ``truth`` and ``rank``) and :class:`Replicate`'s fields. The same
-    arguments give the same row in any process."""
-    base = _process_base()
+    ``settings`` (its keyword arguments, and ``specimens``, default 1) on the base posterior, built once per
+    process (so every replicate a worker runs shares its compiled log posterior). The result is a JSON-ready
+    row: ``seed``, ``exact_inputs``, ``specimens``, ``names`` (:func:`rank_names`, the order of ``truth`` and
+    ``rank``) and :class:`Replicate`'s fields. The same arguments give the same row in any process."""
+    specimens = settings.pop("specimens", 1)
+    base = _process_base(specimens)
     rep = run_replicate(base, index, seed=seed, **settings)
     exact_inputs = settings.get("exact_inputs", False)
-    return {"seed": seed, "exact_inputs": exact_inputs, "names": list(base.names), **rep.as_dict()}
+    row = {"seed": seed, "exact_inputs": exact_inputs, "names": list(rank_names(base)), **rep.as_dict()}
+    return row if specimens == 1 else {"specimens": specimens, **row}
 
 
 def wilson_interval(k: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
@@ -204,6 +267,9 @@ __all__ = [
     "Replicate",
     "base_posterior",
     "coverage_table",
+    "derived_levels",
+    "draw_truth",
+    "rank_names",
     "replicate_unit",
     "run_replicate",
     "simulate",
