@@ -6,9 +6,12 @@ The generating elements of each bundled file are its ``config_*`` entries and ph
 among the tests its signature shows in (``Effect.shows_in``). The sampled model is read from each material's
 ``summary.json`` in RESULTS (``model.effects``, written by ``peano-bayes run``/``fit``; with ``--discover`` it
 holds what discovery added) or, without RESULTS, is the configured model (the prior's ``[config]``), which
-``run`` samples without ``--discover`` and which discovery only adds to.
+``run`` samples without ``--discover`` and which discovery only adds to. With ``--discover OUT`` it runs the
+model choice of ``run --discover`` itself on each bundled file (discovery from the configured model on the
+fitted tests, :func:`peano_bayes.discovery.choice.choose_model`, seed 0; reports in ``OUT/<code>/``; a report
+already there is read back instead of run again) and checks the model that choice would sample.
 
-    python experiments/model_choice_bundled.py [RESULTS]
+    python experiments/model_choice_bundled.py [RESULTS | --discover OUT]
 
 Last line: one JSON object with per material the visible generating effects, the sampled ones, the missing
 ones, discovery's verdict and named effects (when recorded), and ``all_contained``.
@@ -22,11 +25,14 @@ import tomllib
 from importlib import resources
 from pathlib import Path
 
+from peano_bayes.bundled import dataset_path
+from peano_bayes.data import load
 from peano_bayes.defaults import DEFAULT_TESTS
-from peano_bayes.discovery.choice import effects_in
+from peano_bayes.discovery.choice import choice_from_report, choose_model, effects_in
 from peano_bayes.discovery.effects import LIBRARY
 from peano_bayes.inference.priors import load_prior
 from peano_bayes.physics.model import ModelConfig
+from peano_bayes.pipeline import select_tests
 
 
 def generating_effects(entry: dict) -> set[str]:
@@ -34,7 +40,27 @@ def generating_effects(entry: dict) -> set[str]:
     return set(effects_in(config)) | {q for q in entry.get("quirks", ()) if q in LIBRARY}
 
 
+def discovered(code: str, out: Path) -> tuple[list[str], set[str], dict]:
+    """The fitted tests, the effects of the model ``run --discover`` samples, and discovery's record, for the
+    bundled file ``code`` (discovery run into ``out/code`` unless its report is there already)."""
+    dataset = select_tests(load(dataset_path(code)), DEFAULT_TESTS)
+    config = load_prior(code).config
+    folder = out / code
+    if (folder / "report.json").exists():
+        choice = choice_from_report(config, json.loads((folder / "report.json").read_text()), folder)
+    else:
+        choice = choose_model(dataset, config, folder, seed=0, log=lambda m: print(f"{code}: {m}", flush=True))
+    record = {"verdict": choice.verdict, "named": list(choice.named), "adopted": list(choice.adopted)}
+    return list(dataset.tests), set(effects_in(choice.config)), record
+
+
 def main(argv: list[str]) -> int:
+    discover_out = None
+    if argv[:1] == ["--discover"]:
+        if len(argv) != 2:
+            print("model_choice_bundled.py: error: --discover needs an output folder", file=sys.stderr)
+            return 2
+        discover_out, argv = Path(argv[1]), []
     results = Path(argv[0]) if argv else None
     truth_text = resources.files("peano_bayes.bundled").joinpath("data/true_parameters.toml").read_text()
     truth = tomllib.loads(truth_text)
@@ -42,7 +68,9 @@ def main(argv: list[str]) -> int:
     print(f"{'material':9s} {'visible generating effects':90s} missing  discovery")
     for code, entry in truth.items():
         discovery = None
-        if results is not None:
+        if discover_out is not None:
+            tests, sampled, discovery = discovered(code, discover_out)
+        elif results is not None:
             summary = json.loads((results / code / "summary.json").read_text())
             tests = summary["tests"]
             if "model" in summary:
@@ -63,7 +91,10 @@ def main(argv: list[str]) -> int:
             "missing": missing,
             "discovery": discovery,
         }
-    source = str(results) if results is not None else "configured models (bundled priors)"
+    if discover_out is not None:
+        source = f"run --discover's model choice (reports in {discover_out})"
+    else:
+        source = str(results) if results is not None else "configured models (bundled priors)"
     print(json.dumps({"source": source, "materials": out, "all_contained": all_contained}))
     return 0 if all_contained else 1
 

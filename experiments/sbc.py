@@ -38,6 +38,7 @@ from peano_bayes.validation.sbc import (
     RANK_DRAWS,
     base_posterior,
     coverage_table,
+    rank_names,
     replicate_unit,
 )
 
@@ -169,7 +170,7 @@ def main(argv=None) -> int:
     raise_failures(outcomes, "replicate")
     replicates = [done[i] for i in range(args.replicates)]
     # theta's entries, as the rows name them (rows of earlier studies do not: then from the posterior itself)
-    names = replicates[0].get("names") or list(base_posterior(args.specimens).names)
+    names = replicates[0].get("names") or list(rank_names(base_posterior(args.specimens)))
     rows = coverage_table(replicates, names)
     seconds = time.perf_counter() - t0 + sum(r["seconds"] for r in replicates if r["index"] not in todo)
     flat = [{k: (json.dumps(v) if isinstance(v, list) else v) for k, v in row.items()} for row in rows]

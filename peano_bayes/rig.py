@@ -600,7 +600,8 @@ def simulate_dataset(
     - ``specimen_values``: one mapping per specimen (``specimens`` of them) of parameter values [SI] that
       specimen has, replacing its drawn value of each name given (for studies that draw the specimens
       themselves, such as the hierarchical simulation-based calibration); every name and value is checked as
-      in ``true_params``.
+      in ``true_params``, and every name must be one the final configuration reads. ``true_params`` (the
+      provenance's ``parameters``) then holds the values the specimens were not given.
 
     **Returns:** a :class:`~peano_bayes.data.Dataset` on :data:`~peano_bayes.physics.PAPER_GEOMETRY`. Load cycle
     runs ``0 .. repeats-1`` are at 0 kPa, ``repeats .. 2 repeats-1`` at the test pressure. ``force_n`` is NaN in
@@ -622,13 +623,20 @@ def simulate_dataset(
     params, fallback = resolve_parameters(true_params, final_config)
     seed, repeats, specimens, tests = _check_run(seed, repeats, specimens, tests, specimen_spread)
     overrides = _check_specimen_values(specimen_values, specimens)
+    for index, mapping in enumerate(overrides):
+        unread = [name for name in mapping if name not in params]
+        if unread:
+            raise PeanoBayesInputError(
+                f"specimen_values[{index}]: the simulated model does not read {', '.join(map(repr, unread))}; "
+                "switch its element on (config or quirks) or leave the name out"
+            )
     report = progress or (lambda line: None)
 
     runs, per_specimen = [], {}
     for index in range(specimens):
         label = string.ascii_uppercase[index]
         own = specimen_parameters(params, specimen_spread, np.random.default_rng([seed, _SPECIMEN_STREAM, index]))
-        own.update({k: v for k, v in overrides[index].items() if k in own})
+        own.update(overrides[index])
         per_specimen[label] = own
         truths, earlier = [], collections.Counter()  # conditions per test on the mounts before
         for added in mounts:

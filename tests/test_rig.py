@@ -156,6 +156,9 @@ def test_specimen_values_set_each_specimens_own_parameters():
         simulate_dataset("FC", specimen_values=[{}], **kwargs)
     with pytest.raises(PeanoBayesInputError, match=r"specimen_values\[1\]: parameter 'bending_k1_n'.*bounds"):
         simulate_dataset("FC", specimen_values=[{}, {"bending_k1_n": -1.0}], **kwargs)
+    # the default model has no mount: a value for it would be silently unused
+    with pytest.raises(PeanoBayesInputError, match=r"specimen_values\[0\]: .*does not read 'mount_compliance_m_per_n'"):
+        simulate_dataset("FC", specimen_values=[{"mount_compliance_m_per_n": 1e-6}, {}], **kwargs)
 
 
 def test_series_compliance_lowers_blocking_force():

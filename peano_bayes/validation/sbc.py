@@ -16,23 +16,25 @@ study is the specimen hierarchy of :mod:`peano_bayes.inference.posterior`: the p
 ``specimen_log_sd`` and theta the specimens' log contrasts of each free parameter that differs between
 specimens, drawn ``N(0, spread^2)`` as the posterior's own prior says; each specimen is simulated with its own
 values (``simulate_dataset(specimen_values=...)``). Beside theta the study ranks the two derived levels a
-designer reads (:meth:`Posterior.levels`): the **population** value ``mu = m exp(-spread z_bar)``,
-``z_bar ~ N(0, 1/n)``, and a **new specimen** ``mu exp(spread z_new)``, each truth drawn by that same rule, so
-their ranks are uniform exactly when the levels' computation is calibrated too.
+designer reads (:meth:`Posterior.levels`): the **population** value and a **new specimen**. Their truths come
+from the generative hierarchy (population value from the prior, specimens around it, :func:`draw_truth`), not
+from the levels' own rule, so their ranks test that rule and its approximation as well.
 """
 
 from __future__ import annotations
 
 import functools
+import math
 import time
 from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import stats
 
+from ..errors import PeanoBayesInputError
 from ..inference.laplace import posterior_mode, refine_mode
 from ..inference.likelihood import prepare
-from ..inference.posterior import SPECIMEN_SD, Posterior, build_posterior
+from ..inference.posterior import SPECIMEN_SD, Posterior, build_posterior, helmert
 from ..inference.priors import prior_for
 from ..inference.sample import sample
 from ..physics import DEFAULT_CONFIG
@@ -50,8 +52,10 @@ RANK_DRAWS = 99
 def simulate(params: dict, seed: int, exact_inputs: bool = False, specimen_values=None):
     """The SBC protocol's rig dataset from model and noise parameters [SI] (``NOISE_NAME`` sets the load
     cell's noise; the other sensors keep the rig's defaults, or with ``exact_inputs`` the strain and pressure
-    sensors are noiseless, so the denoised driving inputs are exact). ``specimen_values``: one mapping of
-    parameter values per specimen (default one specimen, ``params`` itself)."""
+    sensors are noiseless, so the denoised driving inputs are exact). ``specimen_values``: one mapping per
+    specimen of its own values [SI], overriding ``params`` for those names (default: one specimen with
+    ``params`` itself). The spread ``specimen_log_sd`` is a parameter of the inference, not of the rig, and
+    is not passed on."""
     model = {k: v for k, v in params.items() if k not in (NOISE_NAME, SPECIMEN_SD)}
     noise = RigNoise(force_sd_n=float(params[NOISE_NAME]))
     if exact_inputs:
@@ -88,18 +92,80 @@ def rank_names(base: Posterior) -> tuple[str, ...]:
     return base.names + derived
 
 
-def draw_truth(base: Posterior, rng: np.random.Generator) -> tuple[np.ndarray, list[dict] | None]:
-    """A truth from the posterior's own prior: theta (D,) and, with several specimens, each specimen's values
-    of the varying parameters [SI] (``None`` with one specimen)."""
-    u = base.prior.sample(rng, 1)[0]
+@dataclass(frozen=True)
+class Truth:
+    """One replicate's generating values: ``theta`` (D,) in the posterior's coordinates; ``ranked`` (K,) the
+    quantities of :func:`rank_names` (theta, then the log of the derived levels [ln SI]);
+    ``specimen_values`` each specimen's values [SI] of the varying parameters (``None`` with one specimen)."""
+
+    theta: np.ndarray
+    ranked: np.ndarray
+    specimen_values: list[dict] | None
+
+
+def draw_truth(base: Posterior, rng: np.random.Generator) -> Truth | None:
+    """A truth drawn by the generative hierarchy (``None`` when it falls outside the prior's support, to be
+    redrawn).
+
+    With one specimen theta is a prior draw. With ``n`` specimens the prior's entry of each varying
+    parameter is read as the **population** value ``mu`` (not the specimens' geometric mean ``m`` the
+    posterior samples): specimen ``s`` has ``x_s = mu exp(tau z_s)``, a new specimen ``mu exp(tau z_new)``,
+    ``z ~ N(0, 1)``; theta then holds ``m`` and the contrasts ``c = H^T ln(x / m)``. So the population and
+    new-specimen ranks test :meth:`Posterior.levels` and its approximation (a prior flat in ``ln x`` over a few
+    ``tau``; the prior on ``m`` that the posterior assumes is the population prior, while this draw's ``m`` is
+    that prior widened by ``N(0, tau^2 / n)``) rather than repeat its own rule."""
+    prior = base.prior
+    u = prior.sample(rng, 1)[0]
     if not base.n_contrasts:
-        return u, None
-    spread = float(base.prior.from_unconstrained(u)[SPECIMEN_SD])
-    theta = np.concatenate([u, spread * rng.standard_normal(base.n_contrasts)])
-    params = base.params(theta)
-    offsets = {k: np.asarray(v) for k, v in base.offsets(theta).items()}
-    n = len(base.observations.specimens)
-    return theta, [{p: float(params[p]) * float(np.exp(offsets[p][s])) for p in base.varying} for s in range(n)]
+        return Truth(u, u, None)
+    values = {k: float(v) for k, v in prior.from_unconstrained(u).items()}
+    tau, n = values[SPECIMEN_SD], len(base.observations.specimens)
+    z = rng.standard_normal((len(base.varying), n))
+    z_new = rng.standard_normal(len(base.varying))
+    h = helmert(n)
+    sampled, contrasts, derived = dict(values), [], []
+    specimen_values: list[dict] = [{} for _ in range(n)]
+    for i, p in enumerate(base.varying):
+        log_x = math.log(values[p]) + tau * z[i]
+        sampled[p] = float(np.exp(log_x.mean()))
+        contrasts.append(h.T @ (log_x - log_x.mean()))
+        for s in range(n):
+            specimen_values[s][p] = float(np.exp(log_x[s]))
+        derived += [math.log(values[p]), math.log(values[p]) + tau * z_new[i]]
+    theta = np.concatenate([np.asarray(prior.to_unconstrained(sampled), dtype=float), *contrasts])
+    if not np.all(np.isfinite(theta)):
+        return None
+    return Truth(theta, np.concatenate([theta, derived]), specimen_values)
+
+
+def replicate_data(base: Posterior, index: int, *, seed: int, exact_inputs: bool = False):
+    """Replicate ``index``'s truth and rig data: ``(truth, dataset, redraws, rng)``, the replicate's random
+    stream (``[seed, index]``) left where the data drew from it (the derived levels of the posterior draws
+    continue it). A draw outside the prior's or the rig's bounds, or one whose simulation the rig refuses, is
+    redrawn (``redraws`` counts them; more than 20 raise)."""
+    rng = np.random.default_rng([seed, index])
+    redraws = 0
+    while True:
+        truth = draw_truth(base, rng)
+        if truth is not None:
+            theta = truth.theta
+            params = {
+                **base.fixed,
+                **{k: float(v) for k, v in base.prior.from_unconstrained(theta[: base.prior.ndim]).items()},
+            }
+            try:
+                data = simulate(
+                    params,
+                    seed=int(rng.integers(2**31)),
+                    exact_inputs=exact_inputs,
+                    specimen_values=truth.specimen_values,
+                )
+                return truth, data, redraws, rng
+            except (RigSimulationError, PeanoBayesInputError):  # a solver miss, or a value past the rig's bounds
+                pass
+        redraws += 1
+        if redraws > 20:
+            raise RuntimeError(f"replicate {index}: 20 truths in a row could not be simulated")
 
 
 def derived_levels(base: Posterior, thetas: np.ndarray, rng: np.random.Generator) -> np.ndarray:
@@ -118,10 +184,10 @@ def derived_levels(base: Posterior, thetas: np.ndarray, rng: np.random.Generator
 
 @dataclass(frozen=True)
 class Replicate:
-    """One SBC replicate: ``index``; ``truth`` (K,) the ranked quantities of :func:`rank_names` (theta, plus the
-    derived levels in the hierarchical study); ``rank`` (K,) of the truth among :data:`RANK_DRAWS` thinned
-    draws; ``covered`` level -> (K,) bool; ``converged``; ``steps``; ``tau_max``;
-    ``seconds``; ``redraws`` prior draws the rig could not simulate before this one."""
+    """One SBC replicate: ``index``; ``truth`` (K,) the ranked quantities of :func:`rank_names` (theta in
+    the posterior's coordinates, then the derived levels as ln of their SI values); ``rank`` (K,) of the truth
+    among :data:`RANK_DRAWS` thinned draws; ``covered`` level -> (K,) bool; ``converged``; ``steps``;
+    ``tau_max``; ``seconds``; ``redraws`` truths that could not be simulated before this one."""
 
     index: int
     truth: list
@@ -148,35 +214,23 @@ def run_replicate(
     max_steps: int = 4000,
     exact_inputs: bool = False,
 ) -> Replicate:
-    """Replicate ``index`` of the study with root ``seed``: truth from the prior, data from the rig (see
-    :func:`simulate` for ``exact_inputs``), inference from the prior median (never the truth), ranks and
-    coverage."""
+    """Replicate ``index`` of the study with root ``seed``: truth and rig data from :func:`replicate_data`,
+    inference from the prior median (never the truth), ranks and coverage of every quantity of
+    :func:`rank_names`."""
     t0 = time.perf_counter()
-    rng = np.random.default_rng([seed, index])
     prior = base.prior
-    redraws = 0
-    while True:
-        theta, specimen_values = draw_truth(base, rng)
-        params = {**base.fixed, **{k: float(v) for k, v in prior.from_unconstrained(theta[: prior.ndim]).items()}}
-        try:
-            data = simulate(
-                params, seed=int(rng.integers(2**31)), exact_inputs=exact_inputs, specimen_values=specimen_values
-            )
-            break
-        except RigSimulationError:  # the rig refuses a simulation whose solver misses its tolerance
-            redraws += 1
-            if redraws > 20:
-                raise
+    truth, data, redraws, rng = replicate_data(base, index, seed=seed, exact_inputs=exact_inputs)
     try:  # same protocol: reuse the compiled log posterior
         posterior = base.with_observations(prepare(data))
     except ValueError:  # the replicate's inputs were cut into other segments (other bin shapes): its own
         posterior = replace(base, observations=prepare(data))
-    draws = prior.sample(np.random.default_rng(0), 2000)
+    prior_draws = prior.sample(np.random.default_rng(0), 2000)
     start = np.concatenate([np.asarray(prior.median_unconstrained()), np.zeros(base.n_contrasts)])
-    spread = np.std(draws, axis=0)
-    if base.n_contrasts:  # contrasts start at 0 with the prior's marginal sd of one, spread * N(0, 1)
-        sd = np.asarray(prior.from_unconstrained(draws)[SPECIMEN_SD]) * np.random.default_rng(1).standard_normal(2000)
-        spread = np.concatenate([spread, np.full(base.n_contrasts, np.std(sd))])
+    spread = np.std(prior_draws, axis=0)
+    if base.n_contrasts:  # each contrast starts at 0 with the sd of its prior, tau N(0, 1) (about 0.2)
+        tau = np.asarray(prior.from_unconstrained(prior_draws)[SPECIMEN_SD])
+        contrast_sd = np.std(tau * np.random.default_rng(1).standard_normal(tau.shape))
+        spread = np.concatenate([spread, np.full(base.n_contrasts, contrast_sd)])
     posterior = posterior.with_batch_rows(n_walkers // 2)  # the sampler's batch size: one compilation
     laplace = refine_mode(posterior.batched, posterior_mode(posterior, start, np.diag(spread**2)))
     result = sample(
@@ -191,12 +245,8 @@ def run_replicate(
         progress=False,
         log=lambda message: None,
     )
-    draws = result.kept().reshape(-1, posterior.ndim)
-    if base.varying:  # the derived truths by the levels' own rule, from the replicate's stream
-        truth = derived_levels(base, theta[None], rng)[0]
-        draws = derived_levels(base, draws, rng)
-    else:
-        truth = theta
+    draws = derived_levels(base, result.kept().reshape(-1, posterior.ndim), rng)
+    truth = truth.ranked
     thinned = draws[np.linspace(0, len(draws) - 1, RANK_DRAWS).round().astype(int)]
     rank = (thinned < truth).sum(axis=0)
     covered = {}
@@ -265,11 +315,13 @@ __all__ = [
     "SBC_FREE",
     "SBC_MATERIAL",
     "Replicate",
+    "Truth",
     "base_posterior",
     "coverage_table",
     "derived_levels",
     "draw_truth",
     "rank_names",
+    "replicate_data",
     "replicate_unit",
     "run_replicate",
     "simulate",
