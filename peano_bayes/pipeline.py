@@ -34,7 +34,7 @@ from .errors import PeanoBayesInputError
 from .formatting import format_number
 from .inference.coordinates import sampler_coordinates
 from .inference.fit import fit, fit_quality
-from .inference.laplace import posterior_mode, refine_mode
+from .inference.laplace import NonCentred, posterior_mode, refine_mode
 from .inference.likelihood import prepare
 from .inference.posterior import CONTRAST_PREFIX, DEFAULT_HELD, SPECIMEN_SD, build_posterior
 from .inference.priors import load_prior
@@ -300,7 +300,7 @@ def infer(
     timings["compile_s"] = time.perf_counter() - t0
     if laplace is not None:
         exact = laplace
-        laplace = refine_mode(posterior.batched, exact)
+        laplace = refine_mode(posterior.batched, exact, coordinates=NonCentred.of(posterior))
         centre, covariance = laplace.mode, laplace.covariance
         timings["mode_s"] = exact.seconds + laplace.seconds
         log(

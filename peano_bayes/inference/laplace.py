@@ -8,6 +8,14 @@ on the negative log posterior over the whole theta (noise scales, pooling scale 
 then takes the covariance as the inverse Hessian, by central differences of the JAX gradient. One compiled
 ``value_and_grad`` serves the optimiser, the values and the Hessian: a second compiled program (optimistix's
 own loop, or a compiled Hessian) cost more compile time than the whole optimisation.
+
+**Several specimens: the mode is sought in non-centred coordinates.** With centred contrasts ``c ~ N(0,
+tau^2)`` (:mod:`.posterior`) the joint density has no mode when the data allow the specimens to be alike: along
+``c -> 0`` it grows like ``tau^(1-v)`` as the spread ``tau -> 0`` (``v`` contrasts; the 1 is the spread's own
+log-transform Jacobian), so BFGS runs down the funnel (on an SBC replicate with spread 0.016 it reached
+``ln tau = -344``, where the Hessian overflowed). Both mode searches therefore move ``eta = (u, z)``, ``c =
+tau z``, whose density ``p(theta(eta)) tau^v`` is bounded there (:class:`NonCentred`); the mode and covariance
+are reported in theta. With one specimen ``eta`` is theta.
 """
 
 from __future__ import annotations
@@ -21,7 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy import optimize
 
-from .posterior import Posterior
+from .posterior import SPECIMEN_SD, Posterior
 
 
 @dataclass(frozen=True, eq=False)
@@ -40,6 +48,89 @@ class Laplace:
     @property
     def succeeded(self) -> bool:
         return self.status == ""
+
+
+@dataclass(frozen=True, eq=False)
+class NonCentred:
+    """The map ``eta = (u, z) -> theta = (u, c)``, ``c = tau(u) z``, of a posterior with ``v`` specimen
+    contrasts (``tau`` the spread ``specimen_log_sd`` at entry ``index`` of ``u``, ``d`` entries of ``u``).
+    ``marginal``: the spread's prior marginal (its transform gives ``tau`` and ``d tau / d u``). Every method
+    takes points of shape (..., D)."""
+
+    d: int
+    index: int
+    marginal: object
+
+    @classmethod
+    def of(cls, posterior) -> NonCentred | None:
+        """The map for ``posterior``; ``None`` when it has no contrasts (then eta is theta)."""
+        if not getattr(posterior, "n_contrasts", 0):
+            return None
+        prior = posterior.prior
+        return cls(prior.ndim, prior.names.index(SPECIMEN_SD), prior.marginals[SPECIMEN_SD])
+
+    def _tau(self, x):
+        tau, log_dtau = self.marginal.from_unconstrained(np.asarray(x)[..., self.index])
+        return np.asarray(tau, dtype=float), np.exp(np.asarray(log_dtau, dtype=float))
+
+    def to_theta(self, eta):
+        eta = np.asarray(eta, dtype=float)
+        tau = self._tau(eta)[0]
+        return np.concatenate([eta[..., : self.d], tau[..., None] * eta[..., self.d :]], axis=-1)
+
+    def to_eta(self, theta):
+        theta = np.asarray(theta, dtype=float)
+        tau = self._tau(theta)[0]
+        return np.concatenate([theta[..., : self.d], theta[..., self.d :] / tau[..., None]], axis=-1)
+
+    def log_jacobian(self, eta):
+        """ln|det d theta / d eta| = v ln tau, shape (...)."""
+        eta = np.asarray(eta, dtype=float)
+        return (eta.shape[-1] - self.d) * np.log(self._tau(eta)[0])
+
+    def jacobian(self, eta):
+        """(D, D) d theta / d eta at one point ``eta`` (D,)."""
+        eta = np.asarray(eta, dtype=float)
+        tau, dtau = self._tau(eta)
+        jac = np.eye(eta.size)
+        jac[self.d :, self.d :] *= tau
+        jac[self.d :, self.index] = eta[self.d :] * dtau
+        return jac
+
+    def log_jacobian_gradient(self, eta):
+        """(D,) gradient of :meth:`log_jacobian` at one point ``eta`` (D,)."""
+        eta = np.asarray(eta, dtype=float)
+        tau, dtau = self._tau(eta)
+        grad = np.zeros(eta.size)
+        grad[self.index] = (eta.size - self.d) * dtau / tau
+        return grad
+
+
+class _Same:
+    """Eta is theta (a posterior without specimen contrasts)."""
+
+    def to_theta(self, eta):
+        return np.asarray(eta, dtype=float)
+
+    to_eta = to_theta
+
+    def log_jacobian(self, eta):
+        return np.zeros(np.shape(eta)[:-1])
+
+    def jacobian(self, eta):
+        return np.eye(np.size(eta))
+
+    def log_jacobian_gradient(self, eta):
+        return np.zeros(np.size(eta))
+
+
+def _in_theta(jac: np.ndarray, covariance_eta: np.ndarray) -> np.ndarray:
+    return jac @ covariance_eta @ jac.T
+
+
+def _in_eta(jac: np.ndarray, covariance_theta: np.ndarray) -> np.ndarray:
+    inverse = np.linalg.inv(jac)
+    return inverse @ covariance_theta @ inverse.T
 
 
 def finite_difference_hessian(grad, x: np.ndarray, step: float = 1e-4) -> np.ndarray:
@@ -64,38 +155,52 @@ def posterior_mode(
     """BFGS from ``start`` (D,) to the mode of ``posterior``; the Laplace covariance there.
 
     Directions the Hessian does not pin down (non-positive or tiny curvature) get the variance of
-    ``fallback_covariance`` instead, and no direction's standard deviation exceeds ``max_sd`` (in theta, i.e.
-    log units for positive parameters). If BFGS ends somewhere worse than ``start`` or non-finite, ``start``
-    and ``fallback_covariance`` are returned with the optimiser's message in ``status``.
+    ``fallback_covariance`` instead, and no direction's standard deviation exceeds ``max_sd`` (in the
+    coordinates searched: theta, i.e. log units for positive parameters, with specimen contrasts divided by the
+    spread, see the module docstring). If BFGS ends somewhere worse than ``start`` or non-finite, ``start`` and
+    ``fallback_covariance`` are returned with the optimiser's message in ``status``.
     """
     t0 = time.perf_counter()
     start = np.asarray(start, dtype=float)
     value_and_grad = getattr(posterior, "value_and_grad", None)  # a Posterior's is compiled once per protocol
     if value_and_grad is None:
         value_and_grad = jax.jit(jax.value_and_grad(lambda theta: -posterior.log_prob(theta)))
+    coords = NonCentred.of(posterior) or _Same()
 
-    def objective(x):
-        value, grad = value_and_grad(jnp.asarray(x))
-        if not np.isfinite(float(value)):  # outside the support: an infinite wall the line search backs off
-            return np.inf, np.zeros_like(x)
-        return float(value), np.asarray(grad)
+    def objective(eta):  # -ln p(eta) = -ln p(theta(eta)) - ln|d theta / d eta|, and its gradient in eta
+        theta = coords.to_theta(eta)
+        value, grad = value_and_grad(jnp.asarray(theta))
+        value = float(value) - float(coords.log_jacobian(eta))
+        if not np.isfinite(value) or not np.all(np.isfinite(grad)):  # outside the support: a wall
+            return np.inf, np.zeros_like(eta)
+        return value, coords.jacobian(eta).T @ np.asarray(grad) - coords.log_jacobian_gradient(eta)
 
-    lp_start = -objective(start)[0]
-    found = optimize.minimize(objective, start, jac=True, method="BFGS", options={"maxiter": max_steps, "gtol": 1e-6})
-    mode, lp_mode, steps = np.asarray(found.x), -float(found.fun), int(found.nit)
+    start_eta = coords.to_eta(start)
+    lp_start = -objective(start_eta)[0]
+    found = optimize.minimize(
+        objective, start_eta, jac=True, method="BFGS", options={"maxiter": max_steps, "gtol": 1e-6}
+    )
+    mode_eta, lp_mode, steps = np.asarray(found.x), -float(found.fun), int(found.nit)
     # BFGS's own "precision loss" stop at a flat optimum is not a failure; the gradient norm says how close.
     status = "" if found.success or np.linalg.norm(found.jac) < 1e-2 else str(found.message)
     if not np.isfinite(lp_mode) or lp_mode < lp_start:
         reason = status or "BFGS ended below its start"
-        return Laplace(start, np.asarray(fallback_covariance), lp_start, steps, reason, time.perf_counter() - t0)
-    hessian = finite_difference_hessian(lambda x: objective(x)[1], mode)
-    covariance = _laplace_covariance(hessian, fallback_covariance, max_sd)
-    return Laplace(mode, covariance, lp_mode, steps, status, time.perf_counter() - t0)
+        lp = -float(value_and_grad(jnp.asarray(start))[0])
+        return Laplace(start, np.asarray(fallback_covariance), lp, steps, reason, time.perf_counter() - t0)
+    mode = coords.to_theta(mode_eta)
+    jac = coords.jacobian(mode_eta)
+    hessian = finite_difference_hessian(lambda x: objective(x)[1], mode_eta)
+    covariance = _laplace_covariance(hessian, _in_eta(jac, np.asarray(fallback_covariance)), max_sd)
+    lp = -float(value_and_grad(jnp.asarray(mode))[0])
+    return Laplace(mode, _in_theta(jac, covariance), lp, steps, status, time.perf_counter() - t0)
 
 
 def _laplace_covariance(hessian: np.ndarray, fallback_covariance: np.ndarray, max_sd: float) -> np.ndarray:
     """(D, D) inverse of the Hessian of -log posterior; a direction with no curvature (eigenvalue <= 1e-8) gets
     the fallback's variance along it, and no direction's standard deviation exceeds ``max_sd``."""
+    hessian = np.array(hessian, dtype=float)
+    bad = ~np.all(np.isfinite(hessian), axis=0) | ~np.all(np.isfinite(hessian), axis=1)
+    hessian[bad, :] = hessian[:, bad] = 0.0  # an overflowed row: no curvature known there, use the fallback
     values, vectors = np.linalg.eigh(0.5 * (hessian + hessian.T))
     fallback = np.asarray(fallback_covariance)
     fallback_var = np.einsum("id,ij,jd->d", vectors, fallback, vectors)
@@ -113,6 +218,7 @@ def refine_mode(
     gtol: float = 1e-3,
     max_steps: int = 300,
     max_sd: float = 3.0,
+    coordinates: NonCentred | None = None,
 ) -> Laplace:
     """The mode and Laplace covariance of the full log posterior ``batched`` (``f(thetas (n, D)) -> (n,)``,
     the sampler's own compiled function), from ``start``, the mode of the posterior with exact inputs.
@@ -127,18 +233,26 @@ def refine_mode(
     compiled; then the Hessian by central differences of values (step ``hessian_step``, 2D^2 + 1 points) and
     the covariance as in :func:`posterior_mode`, ``start.covariance`` standing in for directions without
     curvature. If the optimiser ends non-finite or below its start, ``start`` is returned with the full
-    posterior's value at its mode and the reason in ``status``.
+    posterior's value at its mode and the reason in ``status``. ``coordinates``: :class:`NonCentred` for a
+    posterior with specimen contrasts (``NonCentred.of(posterior)``; the search then moves eta, as
+    :func:`posterior_mode` does), ``None`` for theta itself.
     """
     t0 = time.perf_counter()
+    coords = coordinates or _Same()
     d = start.mode.size
-    chol = np.linalg.cholesky(start.covariance)
-    to_theta = lambda u: start.mode + chol @ u  # noqa: E731
+    eta0 = coords.to_eta(start.mode)
+    start_eta = _in_eta(coords.jacobian(eta0), start.covariance)
+    chol = np.linalg.cholesky(start_eta)
+    to_eta = lambda u: eta0 + chol @ u  # noqa: E731
     eye = np.eye(d)
 
+    def minus_log_p(etas):  # -ln p(eta) of each row
+        return -np.asarray(batched(coords.to_theta(etas)), dtype=float) - coords.log_jacobian(etas)
+
     def objective(u):
-        x = to_theta(u)
+        x = to_eta(u)
         points = np.concatenate([x[None], x + step * chol.T, x - step * chol.T])
-        values = -np.asarray(batched(points), dtype=float)
+        values = minus_log_p(points)
         if not np.all(np.isfinite(values)):  # at the support's edge: a wall the line search backs off
             return (values[0] if np.isfinite(values[0]) else np.inf), np.zeros(d)
         return values[0], (values[1 : d + 1] - values[d + 1 :]) / (2.0 * step)
@@ -149,9 +263,11 @@ def refine_mode(
     )
     lp_mode = -float(found.fun)
     status = "" if found.success or np.linalg.norm(found.jac) < 10 * gtol else str(found.message)
+    theta_lp = lambda eta, lp: float(lp - coords.log_jacobian(eta))  # noqa: E731  ln p(theta) from ln p(eta)
     if not np.isfinite(lp_mode) or lp_mode < lp_start:
         reason = status or "BFGS ended below its start"
-        return dataclasses.replace(start, log_prob=lp_start, status=reason, seconds=time.perf_counter() - t0)
+        lp = theta_lp(eta0, lp_start)
+        return dataclasses.replace(start, log_prob=lp, status=reason, seconds=time.perf_counter() - t0)
     u0 = np.asarray(found.x)
     pairs = [(i, j) for i in range(d) for j in range(i + 1, d)]
     h = hessian_step
@@ -163,18 +279,21 @@ def refine_mode(
             u0 - h * (eye[i] - eye[j]),
             u0 - h * (eye[i] + eye[j]),
         ]
-    values = -np.asarray(batched(np.array([to_theta(u) for u in points])), dtype=float)
+    values = minus_log_p(np.array([to_eta(u) for u in points]))
+    mode_eta = to_eta(u0)
+    mode, lp = coords.to_theta(mode_eta), theta_lp(mode_eta, lp_mode)
     if not np.all(np.isfinite(values)):  # a Hessian point beyond the support: keep the start's shape
         status = status or "Hessian not finite; the start's covariance kept"
-        return Laplace(to_theta(u0), start.covariance, lp_mode, int(found.nit), status, time.perf_counter() - t0)
+        return Laplace(mode, start.covariance, lp, int(found.nit), status, time.perf_counter() - t0)
     centre, plus, minus = values[0], values[1 : d + 1], values[d + 1 : 2 * d + 1]
     hessian_u = np.diag((plus - 2.0 * centre + minus) / h**2)
     corners = values[2 * d + 1 :].reshape(-1, 4)
     for (i, j), (pp, pm, mp, mm) in zip(pairs, corners, strict=True):
         hessian_u[i, j] = hessian_u[j, i] = (pp - pm - mp + mm) / (4.0 * h * h)
     inverse = np.linalg.inv(chol)
-    covariance = _laplace_covariance(inverse.T @ hessian_u @ inverse, start.covariance, max_sd)
-    return Laplace(to_theta(u0), covariance, lp_mode, int(found.nit), status, time.perf_counter() - t0)
+    covariance = _laplace_covariance(inverse.T @ hessian_u @ inverse, start_eta, max_sd)
+    covariance = _in_theta(coords.jacobian(mode_eta), covariance)
+    return Laplace(mode, covariance, lp, int(found.nit), status, time.perf_counter() - t0)
 
 
-__all__ = ["Laplace", "finite_difference_hessian", "posterior_mode", "refine_mode"]
+__all__ = ["Laplace", "NonCentred", "finite_difference_hessian", "posterior_mode", "refine_mode"]

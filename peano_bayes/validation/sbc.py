@@ -32,7 +32,7 @@ import numpy as np
 from scipy import stats
 
 from ..errors import PeanoBayesInputError
-from ..inference.laplace import posterior_mode, refine_mode
+from ..inference.laplace import NonCentred, posterior_mode, refine_mode
 from ..inference.likelihood import prepare
 from ..inference.posterior import SPECIMEN_SD, Posterior, build_posterior, helmert
 from ..inference.priors import prior_for
@@ -232,7 +232,8 @@ def run_replicate(
         contrast_sd = np.std(tau * np.random.default_rng(1).standard_normal(tau.shape))
         spread = np.concatenate([spread, np.full(base.n_contrasts, contrast_sd)])
     posterior = posterior.with_batch_rows(n_walkers // 2)  # the sampler's batch size: one compilation
-    laplace = refine_mode(posterior.batched, posterior_mode(posterior, start, np.diag(spread**2)))
+    exact = posterior_mode(posterior, start, np.diag(spread**2))
+    laplace = refine_mode(posterior.batched, exact, coordinates=NonCentred.of(posterior))
     result = sample(
         posterior,
         laplace.mode,
