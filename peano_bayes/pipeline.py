@@ -467,13 +467,19 @@ def model_table(summaries: list[dict]) -> list[str]:
     return [*lines, "", *(f"{n}\n" for n in notes)]
 
 
-def _shown_path(path: str) -> str:
+def shown_dataset_path(path: str) -> str:
     """A dataset path as a reader of ``index.md`` can use it: a bundled file by its place in the package
-    (``peano_bayes/bundled/data/TP.csv``), not the absolute path of the machine that ran the job."""
+    (``peano_bayes/bundled/data/TP.csv``), not the absolute path of the machine that ran the job, also when
+    the job ran from another copy of the package (a clone elsewhere, an installed wheel)."""
     try:
         return str(Path("peano_bayes/bundled/data") / Path(path).resolve().relative_to(bundled.DATA_DIR.resolve()))
     except ValueError:
-        return path
+        pass
+    parts = Path(path).parts
+    for i in range(len(parts) - 3, -1, -1):
+        if parts[i : i + 3] == ("peano_bayes", "bundled", "data"):
+            return str(Path(*parts[i:]))
+    return path
 
 
 #: A material's figures that ``index.md`` links where they exist, in order: file stem -> what it shows.
@@ -512,8 +518,8 @@ def index_markdown(
         lines += [
             f"## {s['material']}",
             "",
-            f"Data: `{_shown_path(s['dataset'])}` ({', '.join(s['tests'])}); {s.get('n_ensembles', 1)} ensembles of "
-            f"{s['n_walkers']} walkers x {s['steps']} steps; "
+            f"Data: `{shown_dataset_path(s['dataset'])}` ({', '.join(s['tests'])}); "
+            f"{s.get('n_ensembles', 1)} ensembles of {s['n_walkers']} walkers x {s['steps']} steps; "
             f"{verdict}. Max R-hat {max(conv['rhat'].values()):.3f}, "
             f"min bulk ESS {min(conv['ess_bulk'].values()):.0f}, "
             f"chain {conv['tau_lengths']:.0f} autocorrelation times long.",
@@ -828,6 +834,7 @@ def fit_many(
 
 __all__ = [
     "RunLog",
+    "shown_dataset_path",
     "ALL_TESTS",
     "BUNDLED_MATERIALS",
     "DEFAULT_MAX_STEPS",

@@ -84,3 +84,5 @@ def test_the_results_page_names_a_bundled_dataset_by_its_place_in_the_package():
     assert str(dataset_path("TP").parent) not in bundled  # not the absolute path of the machine
     own = index_markdown([{**_summary(0.9), "dataset": "/data/rig/my.csv"}])
     assert "Data: `/data/rig/my.csv`" in own
+    clone = index_markdown([{**_summary(0.9), "dataset": "/tmp/job/clone/peano_bayes/bundled/data/FC.csv"}])
+    assert "Data: `peano_bayes/bundled/data/FC.csv`" in clone  # the job ran from another copy of the package
