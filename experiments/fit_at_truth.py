@@ -31,18 +31,27 @@ from peano_bayes.inference.results import SPECIMEN_PREFIX
 
 
 def per_test(params, observations, config) -> dict:
-    out = {}
+    """Per test, over every run group of it (runs of other lengths are other groups): the log-likelihood, the
+    rms of the raw and of the whitened z, and ``runs``: (key, z row) per run."""
+    parts: dict[str, dict] = {}
     for g in observations.groups:
         pred, scale, ll = group_log_likelihood(params, g, config=config, geometry=observations.geometry)
         z = (g.observed - np.asarray(pred)) / np.asarray(scale)
-        white = whitened_residuals(params, g, config=config, geometry=observations.geometry)
-        out[g.test] = {
-            "log_likelihood": float(np.nansum(ll)),
-            "z_rms": float(np.sqrt(np.nanmean(z**2))),
-            "z_whitened_rms": float(np.sqrt(np.nanmean(white**2))),
-            "z": z,
+        white = np.asarray(whitened_residuals(params, g, config=config, geometry=observations.geometry))
+        entry = parts.setdefault(g.test, {"ll": 0.0, "z": [], "white": [], "runs": []})
+        entry["ll"] += float(np.nansum(ll))
+        entry["z"].append(z[np.isfinite(z)])
+        entry["white"].append(white[np.isfinite(white)])
+        entry["runs"] += list(zip(g.keys, z, strict=True))
+    return {
+        test: {
+            "log_likelihood": e["ll"],
+            "z_rms": float(np.sqrt(np.mean(np.concatenate(e["z"]) ** 2))),
+            "z_whitened_rms": float(np.sqrt(np.mean(np.concatenate(e["white"]) ** 2))),
+            "runs": e["runs"],
         }
-    return out
+        for test, e in parts.items()
+    }
 
 
 def main() -> None:
@@ -82,14 +91,12 @@ def main() -> None:
         )
         print(f"{label}: {cells}")
     worst = max(report["truth"], key=lambda t: report["truth"][t]["z_rms"])
-    z = report["truth"][worst]["z"]
-    group = next(g for g in observations.groups if g.test == worst)
-    tenths = np.array_split(np.arange(z.shape[1]), 10)
     np.set_printoptions(precision=2, suppress=True, linewidth=160)
     print(f"{worst} at the truth, mean z per tenth of each run:")
-    for key, row in zip(group.keys, z, strict=True):
-        print(f"  {key}: {np.array([np.nanmean(row[t]) for t in tenths])}")
-    summary = {k: {t: {m: v for m, v in r.items() if m != "z"} for t, r in v.items()} for k, v in report.items()}
+    for key, row in sorted(report["truth"][worst]["runs"], key=lambda kr: kr[0]):
+        row = row[np.isfinite(row)]
+        print(f"  {key}: {np.array([np.mean(part) for part in np.array_split(row, 10)])}")
+    summary = {k: {t: {m: v for m, v in r.items() if m != "runs"} for t, r in v.items()} for k, v in report.items()}
     print(json.dumps({"material": args.code, "worst_test_at_truth": worst, **summary}))
 
 
