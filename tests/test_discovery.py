@@ -48,6 +48,7 @@ from peano_bayes.discovery.workflow import (
     within_two_se,
 )
 from peano_bayes.inference.likelihood import predict, prepare
+from peano_bayes.physics import PARAMETERS
 from peano_bayes.validation.discovery_benchmark import (
     HIDEABLE,
     TRUTH_CONFIG,
@@ -427,8 +428,8 @@ def test_residual_panels_keep_the_base_noise_units_when_a_noise_effect_widens_th
     np.testing.assert_allclose(pressure["before"][0], error / base_sd)
 
 
-def _fake_fit(values: dict, sd: dict, correlation: np.ndarray) -> ModelFit:
-    spec = model_spec(DEFAULT_BASE + ("nonlinear_damping",))
+def _fake_fit(values: dict, sd: dict, correlation: np.ndarray, effect: str = "nonlinear_damping") -> ModelFit:
+    spec = model_spec(DEFAULT_BASE + (effect,))
     x = spec.pinned.copy()
     for name, v in values.items():
         x[NAMES.index(name)] = v
@@ -465,6 +466,21 @@ def test_strength_wald_reduces_to_the_marginal_z_for_one_parameter_and_is_joint_
     fit = _fake_fit({names[0]: 3.0, names[1]: 0.0, names[2]: 0.0}, {names[0]: 1.5, names[1]: 0.0, names[2]: 0.0},
                     np.eye(3))  # fmt: skip
     assert strength_wald(fit, names, damping.off, 1.88) == pytest.approx((4.0, 1.88**2), rel=1e-9)
+
+
+def test_a_spring_that_is_off_when_rigid_is_tested_on_its_compliance():
+    """series_viscoelastic's spring is off at the parameter's upper bound (rigid). Its strength is how far its
+    compliance 1/k is from 0 in sd of 1/k (delta method: k / sd): the bundled TP fit, 2.83e5 +- 3.27e5 N/m, is
+    0.87 sd from off and fails the gate; on k itself it sat 3e6 sd below 1e12 N/m and passed."""
+    kelvin = LIBRARY["series_viscoelastic"]
+    (name,) = kelvin.strength
+    assert kelvin.off[name] == PARAMETERS[name].bounds[1]
+    weak = _fake_fit({name: 2.83e5}, {name: 3.27e5}, np.eye(1), "series_viscoelastic")
+    w, threshold = strength_wald(weak, kelvin.strength, kelvin.off, 1.88)
+    assert w == pytest.approx((2.83e5 / 3.27e5) ** 2, rel=1e-12) and w < threshold
+    firm = _fake_fit({name: 2e4}, {name: 4e3}, np.eye(1), "series_viscoelastic")  # compliance 5 sd from 0
+    w, threshold = strength_wald(firm, kelvin.strength, kelvin.off, 1.88)
+    assert w == pytest.approx(25.0, rel=1e-12) and w > threshold
 
 
 def test_identification_gate_needs_a_strong_held_out_gain_only_on_a_correlation_ridge():
