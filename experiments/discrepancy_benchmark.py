@@ -16,8 +16,10 @@ first pre-registered final run (seeds 12000-12039) was stopped after 31 rows (se
 table. The reason then given, that a47a391 changes discovery's inputs, was wrong (discovery bins by fixed counts
 and never snaps repeats); but a review then found the new effect's scored test out of the registry's order and
 two edge cases of the relaxation signatures, which 888d48b fixes, so the run stays withdrawn and those seeds
-are spent. The final run of this version is pre-registered in ``discrepancy-13000/`` (seeds 13000-13039); a
-later workflow change's final run starts at ``--first-seed 14000``; tuning seeds from 20002.
+are spent. A second (seeds 13000-13039) was stopped after 7 rows when the strength gate was found to pass any
+rigid-off spring (23c3e67); withdrawn too. The final run of this version is pre-registered in
+``discrepancy-14000/`` (seeds 14000-14039); a later workflow change's final run starts at ``--first-seed
+15000``; tuning seeds from 20002.
 
 Runs are work units of ``peano_bayes.fanout`` (``--jobs`` local processes, or a Dask cluster with
 ``--scheduler``). Resumable: this process appends every finished run as one line of ``OUT/runs.jsonl``; a rerun
