@@ -468,19 +468,28 @@ def test_strength_wald_reduces_to_the_marginal_z_for_one_parameter_and_is_joint_
     assert strength_wald(fit, names, damping.off, 1.88) == pytest.approx((4.0, 1.88**2), rel=1e-9)
 
 
-def test_a_spring_that_is_off_when_rigid_is_tested_on_its_compliance():
-    """series_viscoelastic's spring is off at the parameter's upper bound (rigid). Its strength is how far its
-    compliance 1/k is from 0 in sd of 1/k (delta method: k / sd): the bundled TP fit, 2.83e5 +- 3.27e5 N/m, is
-    0.87 sd from off and fails the gate; on k itself it sat 3e6 sd below 1e12 N/m and passed."""
+def test_a_parameter_off_at_its_upper_bound_is_tested_on_its_reciprocal():
+    """series_viscoelastic's spring is off at the parameter's upper bound (rigid): its strength is how far its
+    compliance 1/k is from 1/off, in sd of 1/k (delta method). The bundled TP fit, 2.83e5 +- 3.27e5 N/m, is 0.87
+    sd from off and fails the gate; on k itself it sat 3e6 sd below 1e12 N/m and passed. flow_restriction's
+    orifice is off at its widest: there, near off, the reciprocal's distance is close to the plain one (0.9
+    against 1.0 sd), not inflated by the same rule."""
     kelvin = LIBRARY["series_viscoelastic"]
     (name,) = kelvin.strength
-    assert kelvin.off[name] == PARAMETERS[name].bounds[1]
+    off = kelvin.off[name]
+    assert off == PARAMETERS[name].bounds[1]
     weak = _fake_fit({name: 2.83e5}, {name: 3.27e5}, np.eye(1), "series_viscoelastic")
     w, threshold = strength_wald(weak, kelvin.strength, kelvin.off, 1.88)
-    assert w == pytest.approx((2.83e5 / 3.27e5) ** 2, rel=1e-12) and w < threshold
+    expected = ((1 / 2.83e5 - 1 / off) / (3.27e5 / 2.83e5**2)) ** 2  # 0.75
+    assert w == pytest.approx(expected, rel=1e-9) and w < threshold
     firm = _fake_fit({name: 2e4}, {name: 4e3}, np.eye(1), "series_viscoelastic")  # compliance 5 sd from 0
     w, threshold = strength_wald(firm, kelvin.strength, kelvin.off, 1.88)
-    assert w == pytest.approx(25.0, rel=1e-12) and w > threshold
+    assert w == pytest.approx(25.0, rel=1e-6) and w > threshold
+    inlet = LIBRARY["flow_restriction"]
+    (area,) = [p for p in inlet.strength if inlet.off[p] == PARAMETERS[p].bounds[1]]
+    near = _fake_fit({area: 0.9 * inlet.off[area]}, {area: 0.1 * inlet.off[area]}, np.eye(1), "flow_restriction")
+    w, _ = strength_wald(near, (area,), inlet.off, 1.88)
+    assert w == pytest.approx(0.81, rel=1e-9)
 
 
 def test_identification_gate_needs_a_strong_held_out_gain_only_on_a_correlation_ridge():

@@ -279,18 +279,21 @@ class _Candidate:
 def _standardized_distance(fit: ModelFit, names, off: dict) -> dict:
     """``(value - off) / sd`` of each parameter in ``names`` that has a Laplace sd > 0.
 
-    An off value at the parameter's upper bound stands for the limit ``x -> infinity`` (a rigid series
-    element: ``series_viscoelastic``'s spring is off at ``RIGID_KELVIN_N_PER_M``). Its distance is measured on
-    the compliance ``1/x``, whose off value is 0: ``-(1/x) / (sd / x^2) = -x / sd`` by the delta method (the
-    sign that ``x - off`` has, so the Wald test's correlations keep theirs). Measured on ``x`` itself, any
-    finite stiffness lies millions of sd from 1e12 N/m: on the bundled TP data a fitted 2.8e5 +- 3.3e5 N/m
-    passed the strength gate at 3e6 sd, though its compliance, 3.5e-6 +- 4.1e-6 m/N, is 0.9 sd from off."""
+    An off value at the parameter's upper bound (a rigid series spring, ``series_viscoelastic``'s at
+    ``RIGID_KELVIN_N_PER_M``; an open inlet, ``flow_restriction``'s at the widest orifice) is the end of a
+    scale whose natural null is its reciprocal, the compliance or resistance ``1/x``. There the distance is
+    measured on ``1/x`` against ``1/off``: ``(1/x - 1/off) / (sd / x^2)`` by the delta method, which is
+    ``(x - off) / sd * x / off`` with the sign ``x - off`` has (so the Wald test's correlations keep theirs)
+    and equals the plain distance near ``off``. Measured on ``x``, any finite stiffness lay millions of sd
+    from 1e12 N/m: on the bundled TP data a fitted 2.83e5 +- 3.27e5 N/m passed the strength gate at 3e6 sd,
+    though its compliance is 0.87 sd from off."""
     out = {}
     for p in names:
         sd = fit.sd.get(p, 0.0)
         if sd > 0.0:
-            rigid = PARAMETERS[p].bounds[1] if p in PARAMETERS else None
-            out[p] = -fit.params[p] / sd if off[p] == rigid else (fit.params[p] - off[p]) / sd
+            x, zero = fit.params[p], off[p]
+            at_upper_bound = p in PARAMETERS and zero == PARAMETERS[p].bounds[1]
+            out[p] = (x - zero) / sd * (x / zero if at_upper_bound else 1.0)
     return out
 
 
