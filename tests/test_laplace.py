@@ -5,6 +5,7 @@ from dataclasses import dataclass
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 from scipy import optimize
 
 from peano_bayes.inference.laplace import (
@@ -58,6 +59,9 @@ def test_a_start_better_than_where_bfgs_ends_is_kept():
     laplace = posterior_mode(Cliff(), np.zeros(2), fallback)
     np.testing.assert_array_equal(laplace.mode, np.zeros(2))
     np.testing.assert_array_equal(laplace.covariance, fallback)
+    outside = posterior_mode(Cliff(), np.ones(2), fallback)  # a start where the density is 0
+    assert outside.status == "the start's log posterior or its gradient is not finite" and not outside.succeeded
+    np.testing.assert_array_equal(outside.mode, np.ones(2))
 
 
 def test_finite_difference_hessian_of_a_cubic():
@@ -132,9 +136,18 @@ class Funnel:
         return prior + pooled + jnp.sum(-0.5 * ((self.y - c) / 0.05) ** 2)
 
 
-def test_the_non_centred_map_and_its_jacobian_match_finite_differences():
+@pytest.mark.parametrize("transform", ["log", "logit"])
+def test_the_non_centred_map_and_its_jacobian_match_finite_differences(transform):
+    """Under a log transform dtau/du equals tau, so the logit case (a spread bounded above, 0-0.5) is what tells
+    a Jacobian using tau from one using dtau/du."""
     funnel = Funnel()
     coords = NonCentred.of(funnel)
+    if transform == "logit":
+        from peano_bayes.inference.priors import prior_for
+
+        marginal = prior_for("TP").marginals["friction_pressure_fraction"]
+        assert marginal.transform == "logit"
+        coords = NonCentred(1, 0, marginal)
     eta = np.array([-2.3, 0.7, -1.1])
     np.testing.assert_allclose(coords.to_eta(coords.to_theta(eta)), eta, rtol=1e-12)
     h = 1e-6
@@ -158,6 +171,7 @@ def test_the_mode_of_a_hierarchy_whose_specimens_are_alike_is_sought_where_it_ex
     assert laplace.succeeded, laplace.status
     tau = float(funnel.marginal.from_unconstrained(laplace.mode[0])[0])
     assert 0.05 < tau < 0.5, tau  # the data barely inform the spread: near the prior's mode in u, 0.2
+    assert laplace.log_prob == pytest.approx(float(funnel.log_prob(jnp.asarray(laplace.mode))), abs=1e-9)  # in theta
     # the same search in theta collapses the spread
     minus = jax.jit(jax.value_and_grad(lambda t: -funnel.log_prob(t)))
     in_theta = optimize.minimize(
@@ -169,8 +183,23 @@ def test_the_mode_of_a_hierarchy_whose_specimens_are_alike_is_sought_where_it_ex
     h = 1e-5
     gradient = [(log_p_eta(eta + h * e) - log_p_eta(eta - h * e)) / (2 * h) for e in np.eye(3)]
     np.testing.assert_allclose(gradient, 0.0, atol=1e-4)
-    assert np.all(np.isfinite(laplace.covariance)) and np.all(np.linalg.eigvalsh(laplace.covariance) > 0)
+    # the covariance is the inverse Hessian of -ln p(eta), carried to theta by d theta / d eta
+    h = 1e-3
+    eye = np.eye(3)
+    hessian = np.array(
+        [
+            [
+                (log_p_eta(eta + h * (a + b)) - log_p_eta(eta + h * (a - b)) - log_p_eta(eta - h * (a - b))
+                 + log_p_eta(eta - h * (a + b))) / (4 * h * h)
+                for b in eye
+            ]
+            for a in eye
+        ]
+    )  # fmt: skip
+    jac = coords.jacobian(eta)
+    np.testing.assert_allclose(laplace.covariance, jac @ np.linalg.inv(-hessian) @ jac.T, rtol=1e-3, atol=1e-9)
     batched = jax.jit(jax.vmap(funnel.log_prob))
     refined = refine_mode(lambda thetas: np.asarray(batched(jnp.asarray(thetas))), laplace, coordinates=coords)
     np.testing.assert_allclose(refined.mode, laplace.mode, atol=1e-3)  # the same posterior: already there
-    assert np.all(np.isfinite(refined.covariance)) and np.all(np.linalg.eigvalsh(refined.covariance) > 0)
+    np.testing.assert_allclose(refined.covariance, laplace.covariance, rtol=0.02, atol=1e-9)
+    assert refined.log_prob == pytest.approx(float(funnel.log_prob(jnp.asarray(refined.mode))), abs=1e-9)

@@ -177,6 +177,9 @@ def posterior_mode(
 
     start_eta = coords.to_eta(start)
     lp_start = -objective(start_eta)[0]
+    if not np.isfinite(lp_start):  # nothing to climb from: say so rather than "ended below its start"
+        reason = "the start's log posterior or its gradient is not finite"
+        return Laplace(start, np.asarray(fallback_covariance), lp_start, 0, reason, time.perf_counter() - t0)
     found = optimize.minimize(
         objective, start_eta, jac=True, method="BFGS", options={"maxiter": max_steps, "gtol": 1e-6}
     )
