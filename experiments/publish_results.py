@@ -19,13 +19,9 @@ from pathlib import Path
 
 from PIL import Image
 
-from peano_bayes.pipeline import shown_dataset_path
-
 #: A markdown link's target: ``](target)`` up to the closing parenthesis (no spaces in our targets).
 LINK = re.compile(r"\]\(([^)\s]+)\)")
 PAGES = ("index.md", "ranking.md")
-#: The dataset line of a material's section in ``index.md``.
-DATA_PATH = re.compile(r"Data: `([^`]+)`")
 
 
 def linked_files(results: Path) -> tuple[list[Path], list[str]]:
@@ -66,9 +62,6 @@ def main() -> int:
     shutil.rmtree(staging, ignore_errors=True)
     for page in PAGES:
         copy(args.results / page, staging / page)
-        # a job run from another copy of the package (a clone elsewhere) names its bundled data by that path
-        text = (staging / page).read_text()
-        (staging / page).write_text(DATA_PATH.sub(lambda m: f"Data: `{shown_dataset_path(m.group(1))}`", text))
     for path in files:
         copy(args.results / path, staging / path)
     old = args.out.with_name(args.out.name + ".old")

@@ -471,10 +471,6 @@ def shown_dataset_path(path: str) -> str:
     """A dataset path as a reader of ``index.md`` can use it: a bundled file by its place in the package
     (``peano_bayes/bundled/data/TP.csv``), not the absolute path of the machine that ran the job, also when
     the job ran from another copy of the package (a clone elsewhere, an installed wheel)."""
-    try:
-        return str(Path("peano_bayes/bundled/data") / Path(path).resolve().relative_to(bundled.DATA_DIR.resolve()))
-    except ValueError:
-        pass
     parts = Path(path).parts
     for i in range(len(parts) - 3, -1, -1):
         if parts[i : i + 3] == ("peano_bayes", "bundled", "data"):

@@ -124,6 +124,11 @@ class _Same:
         return np.zeros(np.size(eta))
 
 
+def _theta_log_prob(coords, eta, log_prob_eta: float) -> float:
+    """ln p(theta(eta)) from the searched density ln p(eta) = ln p(theta) + ln|d theta / d eta|."""
+    return float(log_prob_eta - coords.log_jacobian(eta))
+
+
 def _in_theta(jac: np.ndarray, covariance_eta: np.ndarray) -> np.ndarray:
     return jac @ covariance_eta @ jac.T
 
@@ -188,14 +193,13 @@ def posterior_mode(
     status = "" if found.success or np.linalg.norm(found.jac) < 1e-2 else str(found.message)
     if not np.isfinite(lp_mode) or lp_mode < lp_start:
         reason = status or "BFGS ended below its start"
-        lp = -float(value_and_grad(jnp.asarray(start))[0])
+        lp = _theta_log_prob(coords, start_eta, lp_start)
         return Laplace(start, np.asarray(fallback_covariance), lp, steps, reason, time.perf_counter() - t0)
-    mode = coords.to_theta(mode_eta)
     jac = coords.jacobian(mode_eta)
     hessian = finite_difference_hessian(lambda x: objective(x)[1], mode_eta)
     covariance = _laplace_covariance(hessian, _in_eta(jac, np.asarray(fallback_covariance)), max_sd)
-    lp = -float(value_and_grad(jnp.asarray(mode))[0])
-    return Laplace(mode, _in_theta(jac, covariance), lp, steps, status, time.perf_counter() - t0)
+    lp = _theta_log_prob(coords, mode_eta, lp_mode)
+    return Laplace(coords.to_theta(mode_eta), _in_theta(jac, covariance), lp, steps, status, time.perf_counter() - t0)
 
 
 def _laplace_covariance(hessian: np.ndarray, fallback_covariance: np.ndarray, max_sd: float) -> np.ndarray:
@@ -266,10 +270,9 @@ def refine_mode(
     )
     lp_mode = -float(found.fun)
     status = "" if found.success or np.linalg.norm(found.jac) < 10 * gtol else str(found.message)
-    theta_lp = lambda eta, lp: float(lp - coords.log_jacobian(eta))  # noqa: E731  ln p(theta) from ln p(eta)
     if not np.isfinite(lp_mode) or lp_mode < lp_start:
         reason = status or "BFGS ended below its start"
-        lp = theta_lp(eta0, lp_start)
+        lp = _theta_log_prob(coords, eta0, lp_start)
         return dataclasses.replace(start, log_prob=lp, status=reason, seconds=time.perf_counter() - t0)
     u0 = np.asarray(found.x)
     pairs = [(i, j) for i in range(d) for j in range(i + 1, d)]
@@ -284,7 +287,7 @@ def refine_mode(
         ]
     values = minus_log_p(np.array([to_eta(u) for u in points]))
     mode_eta = to_eta(u0)
-    mode, lp = coords.to_theta(mode_eta), theta_lp(mode_eta, lp_mode)
+    mode, lp = coords.to_theta(mode_eta), _theta_log_prob(coords, mode_eta, lp_mode)
     if not np.all(np.isfinite(values)):  # a Hessian point beyond the support: keep the start's shape
         status = status or "Hessian not finite; the start's covariance kept"
         return Laplace(mode, start.covariance, lp, int(found.nit), status, time.perf_counter() - t0)

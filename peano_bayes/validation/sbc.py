@@ -47,6 +47,8 @@ NOISE_NAME = "noise_load_cycle_force_n"
 LEVELS = (0.5, 0.9, 0.94)
 #: Posterior draws the truth is ranked among (ranks 0..RANK_DRAWS).
 RANK_DRAWS = 99
+#: The derived levels ranked per varying parameter in the hierarchical study, in order.
+DERIVED_LEVELS = ("population", "new_specimen")
 
 
 def simulate(params: dict, seed: int, exact_inputs: bool = False, specimen_values=None):
@@ -88,7 +90,7 @@ def base_posterior(specimens: int = 1) -> Posterior:
 def rank_names(base: Posterior) -> tuple[str, ...]:
     """The quantities a replicate ranks: theta's entries, then (hierarchical study) ``population__<p>`` and
     ``new_specimen__<p>`` of each parameter ``p`` that differs between specimens."""
-    derived = tuple(f"{level}__{p}" for p in base.varying for level in ("population", "new_specimen"))
+    derived = tuple(f"{level}__{p}" for p in base.varying for level in DERIVED_LEVELS)
     return base.names + derived
 
 
@@ -177,7 +179,7 @@ def derived_levels(base: Posterior, thetas: np.ndarray, rng: np.random.Generator
     derived = [
         np.log(levels[p if level == "population" else f"new_specimen__{p}"])
         for p in base.varying
-        for level in ("population", "new_specimen")
+        for level in DERIVED_LEVELS
     ]
     return np.column_stack([thetas, *derived])
 
