@@ -34,6 +34,7 @@ from peano_bayes.discovery.model import (
     NAMES,
     SUPERSET_CONFIG,
     model_spec,
+    predictions,
     to_unconstrained,
     to_values,
 )
@@ -771,3 +772,56 @@ def test_the_gap_is_scored_against_the_noise_free_truth_on_the_registry_test():
     assert scored["before"] == pytest.approx(0.3, rel=1e-9) and scored["after"] == pytest.approx(0.0, abs=1e-12)
     assert gap["gap_ratio"] == pytest.approx(0.0, abs=1e-12)
     assert scored["effective_snr"] == pytest.approx(1.5, rel=1e-9)
+
+
+def test_the_stroke_inputs_error_is_estimated_from_the_fitted_runs_as_the_inference_integrates_it():
+    """Discovery takes the stroke test's fitted pressure ramp with its error (the inference integrates that error
+    out; discovery profiles it): the error columns of a condition's mean pressure are the exact factor of the
+    mean of its runs' errors; the profiled cost |r|^2 + |a|^2 of the fitted runs equals the quadratic form of
+    the integrated likelihood, with the prediction's derivative along each column by finite differences of the
+    simulation; held-out runs take the fitted runs' estimate and never inform it."""
+    dataset = hidden_dataset(Case(), seed=106)
+    split = discovery_data(dataset, tests=("stroke",))
+    own = replace(dataset, runs=tuple(r for r in dataset.runs if r.specimen == split.specimen and r.test == "stroke"))
+    (reduced,) = prepare(own, DISCOVERY_BIN_SIZES, share_repeats=False, every_sample=DISCOVERY_EVERY_SAMPLE).groups
+    own_error = {key: np.asarray(reduced.pressure_error[row]) for row, key in enumerate(reduced.keys)}
+    n_runs = len(own_error)
+    expected_cov = sum(b.T @ b for b in own_error.values()) / n_runs**2  # (L, L): the mean of n independent errors
+    both = split.both
+    assert both.n_error_sets == 1 and {g.test for g in both.groups} == {"stroke"}
+    for group in both.groups:
+        for columns in np.asarray(group.pressure_error):
+            np.testing.assert_allclose(columns.T @ columns, expected_cov, rtol=0, atol=1e-9 * expected_cov.max())
+
+    truth = {n: v for n, v in TRUTH_PARAMS.items() if n in NAMES}
+    x = model_spec(DEFAULT_BASE, truth).pinned
+    flat = _pointwise(jax.numpy.asarray(x), split.fit)
+    (group,), (sd,) = split.fit.groups, split.fit.sd
+    columns = np.asarray(group.pressure_error)  # (r, q, L), one column set shared by the condition
+    predicted = lambda pressure: np.asarray(  # noqa: E731
+        predictions(jax.numpy.asarray(x), replace(split.fit, groups=(replace(group, pressure_pa=pressure),)))[0][0]
+    )
+    at_fit = predicted(group.pressure_pa)
+    h = 1e-2
+    jac = np.stack(
+        [
+            (predicted(group.pressure_pa + h * c) - predicted(group.pressure_pa - h * c)) / (2 * h)
+            for c in columns.transpose(1, 0, 2)
+        ],
+        axis=1,
+    )  # (r, q, m)
+    e, w = np.asarray(group.observed) - at_fit, 1.0 / np.asarray(sd) ** 2
+    a_matrix = np.eye(jac.shape[1]) + np.einsum("rqm,rm,rpm->qp", jac, w, jac)
+    b = np.einsum("rqm,rm,rm->q", jac, w, e)
+    estimate = np.linalg.solve(a_matrix, b)
+    np.testing.assert_allclose(np.asarray(flat.input_error), estimate, rtol=1e-4, atol=1e-6)
+    profiled = float(np.sum(np.asarray(flat.r) ** 2) + np.sum(np.asarray(flat.input_error) ** 2))
+    integrated = float(np.sum(e**2 * w) - b @ estimate)
+    np.testing.assert_allclose(profiled, integrated, rtol=1e-5)
+    assert profiled < 0.9 * float(np.sum(e**2 * w))  # the ramp's error is visible at this noise: it matters
+
+    # Held-out runs take the estimate of the fitted ones, whatever they observed.
+    held = split.held_out.groups[0]
+    moved = replace(split, held_out=replace(split.held_out, groups=(replace(held, observed=held.observed + 1e-3),)))
+    for data in (split.both, moved.both):
+        np.testing.assert_allclose(np.asarray(_pointwise(jax.numpy.asarray(x), data).input_error), estimate, rtol=1e-4)

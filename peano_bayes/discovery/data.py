@@ -54,6 +54,8 @@ DISCOVERY_BIN_SIZES = MappingProxyType({"load_cycle": 4, "blocking": 4, "stroke"
 DISCOVERY_EVERY_SAMPLE = frozenset({"blocking", "stroke"})
 #: Bins per block of the block tests (residuals within a block are treated as dependent).
 BLOCK_BINS = 10
+#: Relative singular value below which a column of a condition's input error is dropped (exact rank).
+_ERROR_RANK = 1e-5
 #: Pressure resolution [Pa] that tells load-cycle conditions apart.
 _PRESSURE_CLASS_PA = 10e3
 
@@ -101,7 +103,14 @@ class SplitData:
     @property
     def both(self) -> DiscoveryData:
         fit, held = self.fit, self.held_out
-        return replace(fit, groups=fit.groups + held.groups, sd=fit.sd + held.sd, session=fit.session + held.session)
+        return replace(
+            fit,
+            groups=fit.groups + held.groups,
+            sd=fit.sd + held.sd,
+            session=fit.session + held.session,
+            error_set=fit.error_set + held.error_set,
+            informs=fit.informs + held.informs,
+        )
 
     @property
     def n_fit_bins(self) -> int:
@@ -141,6 +150,34 @@ def _share_pressure(group: RunGroup, conditions: list) -> RunGroup:
     return replace(group, pressure_pa=mean(group.pressure_pa), supply_pa=mean(group.supply_pa))
 
 
+def _condition_input_error(group: RunGroup, conditions: list) -> list:
+    """Per condition of ``group`` (``conditions`` (r,) as for :func:`_share_pressure`), the (q, L) columns of
+    the error of its runs' mean fitted pressure: each run's fit error ``B_i a_i`` is independent, so the mean's
+    is the exact low-rank factor of ``sum_i B_i B_i^T / n^2``. Empty when the group carries no input error."""
+    if not group.has_input_error:
+        return []
+    index: dict = {}
+    labels = np.array([index.setdefault(c, len(index)) for c in conditions])
+    error = np.asarray(group.pressure_error, dtype=float)  # (r, q, L): each run's own columns, zero-padded
+    factors = []
+    for label in range(len(index)):
+        stacked = np.concatenate(list(error[labels == label]), axis=0).T / np.sum(labels == label)
+        left, values, _ = np.linalg.svd(stacked, full_matrices=False)
+        keep = values > _ERROR_RANK * max(values.max(initial=0.0), 1e-300)
+        factors.append((left[:, keep] * values[keep]).T)
+    return [factors[label] for label in labels]
+
+
+def _with_error_columns(group: RunGroup, columns: list, q: int) -> RunGroup:
+    """``group`` with each row's pressure error columns (``columns[i]`` (q_i, L)) padded to ``q``."""
+    if not columns:
+        return group
+    error = np.zeros((len(columns), q, group.pressure_pa.shape[1]))
+    for i, c in enumerate(columns):
+        error[i, : c.shape[0]] = c
+    return replace(group, pressure_error=error, strain_error=None)
+
+
 def _take(group: RunGroup, rows: np.ndarray, cycle: np.ndarray) -> RunGroup:
     pick = lambda a: None if a is None else np.asarray(a)[rows]  # noqa: E731
     return replace(
@@ -158,6 +195,8 @@ def _take(group: RunGroup, rows: np.ndarray, cycle: np.ndarray) -> RunGroup:
         shared=np.arange(len(rows)),
         bin_time_s=pick(group.bin_time_s),
         bin_nodes=pick(group.bin_nodes),
+        strain_error=pick(group.strain_error),
+        pressure_error=pick(group.pressure_error),
     )
 
 
@@ -266,9 +305,19 @@ def discovery_data(
         elapsed += float(run.time_s[-1] - run.time_s[0])
     noise = _sensor_noise(runs, specimen)
     observations = prepare(one, bin_sizes, share_repeats=False, every_sample=every_sample)
-    groups = [_share_pressure(g, [conditions[key][0] for key in g.keys]) for g in observations.groups]
-    parts: dict[bool, tuple[list, list]] = {False: ([], []), True: ([], [])}
-    for group in groups:
+    of_group = [[conditions[key][0] for key in g.keys] for g in observations.groups]
+    columns = [_condition_input_error(g, c) for g, c in zip(observations.groups, of_group, strict=True)]
+    q = max((c.shape[0] for cs in columns for c in cs), default=0)
+    sets: dict[tuple, int] = {}  # (group, condition) -> input error set
+    groups, error_set = [], []
+    for i, (group, conds, cols) in enumerate(zip(observations.groups, of_group, columns, strict=True)):
+        group = _share_pressure(group, conds)
+        has_error = bool(cols) and q > 0
+        groups.append(_with_error_columns(group, cols, q) if has_error else replace(group, pressure_error=None))
+        labels = [sets.setdefault((i, c), len(sets)) for c in conds] if has_error else [-1] * len(conds)
+        error_set.append(np.array(labels, dtype=int))
+    parts: dict[bool, tuple[list, list, list]] = {False: ([], [], []), True: ([], [], [])}
+    for group, labels in zip(groups, error_set, strict=True):
         info = np.array([cycles[key] for key in group.keys])
         held = (info[:, 0] == info[:, 1] - 1) & (info[:, 1] >= 2)
         for flag in (False, True):
@@ -276,17 +325,21 @@ def discovery_data(
             if rows.size:
                 parts[flag][0].append(_take(group, rows, info[rows, 0]))
                 parts[flag][1].append(info[rows, 0])
+                parts[flag][2].append(labels[rows])
     n_cycles = int(max(index for index, _ in cycles.values()) + 1)
 
     def build(flag):
         groups = tuple(parts[flag][0])
         sd = tuple(noise[g.test] / np.sqrt(g.counts) for g in groups)
+        # Fitted runs estimate their condition's input error; held-out runs take that estimate, never their own.
+        informs = tuple(np.full(len(labels), 0.0 if flag else 1.0) for labels in parts[flag][2])
         cov = _covariates(groups, parts[flag][1], session_start)
         # The covariates' flat order is every group's (r, m) bins raveled, one group after another.
         scaled = 2.0 * cov.session_s / max(elapsed, 1e-9) - 1.0
         cuts = np.cumsum([g.observed.size for g in groups])[:-1]
         session = tuple(a.reshape(g.observed.shape) for a, g in zip(np.split(scaled, cuts), groups, strict=True))
-        return DiscoveryData(groups, sd, session, n_cycles, dataset.geometry), cov
+        data = DiscoveryData(groups, sd, session, n_cycles, dataset.geometry, tuple(parts[flag][2]), informs, len(sets))
+        return data, cov
 
     (fit, fit_cov), (held, held_cov) = build(False), build(True)
     return SplitData(

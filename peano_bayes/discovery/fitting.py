@@ -2,7 +2,8 @@
 (start, mask) pairs, with a Laplace covariance from the Jacobian.
 
 The objective is the Gaussian negative log-likelihood of the binned data with the model-free noise scale of
-:mod:`.data`, written as a sum of squares: standardized residuals, ``sqrt(2 log(sd / sd0))`` for the
+:mod:`.data`, written as a sum of squares: standardized residuals, the estimated error of the fitted inputs in
+its N(0, 1) units (profiled, see :class:`~.model.Flat`), ``sqrt(2 log(sd / sd0))`` for the
 heteroscedastic noise option, and a weak ridge ``(u - start) / RIDGE_SD`` on the free parameters (numerical
 stability on flat directions, not a prior). Every function is compiled once per data shape; masks, pinned
 values and data are arguments.
@@ -23,7 +24,6 @@ from .model import (
     DiscoveryData,
     ModelSpec,
     evaluate_flat,
-    standardized,
     to_unconstrained,
     values,
 )
@@ -38,7 +38,8 @@ _SOLVER = optx.LevenbergMarquardt(rtol=1e-6, atol=1e-6)
 
 
 def _objective(u, data: DiscoveryData, mask, pinned, centre):
-    r, log_sd, solver_error = standardized(values(u, mask, pinned), data)
+    flat = evaluate_flat(values(u, mask, pinned), data)
+    log_sd = flat.log_sd
     base_log_sd = jnp.concatenate(
         [
             jnp.where(jnp.isfinite(jnp.asarray(g.observed)), jnp.log(sd), 0.0).ravel()
@@ -47,7 +48,14 @@ def _objective(u, data: DiscoveryData, mask, pinned, centre):
     )
     noise_penalty = jnp.sqrt(2.0 * jnp.maximum(log_sd - base_log_sd, 0.0) + 1e-12)
     ridge = jnp.where(mask, (u - centre) / RIDGE_SD, 0.0)
-    return jnp.concatenate([r, noise_penalty, ridge]), solver_error
+    return jnp.concatenate([flat.r, flat.input_error, noise_penalty, ridge]), flat.solver_error
+
+
+def _n_data_residuals(data: DiscoveryData) -> int:
+    """Entries of the objective's residual vector that the data set: every flat bin, then the estimated error
+    of each input error set (q per set)."""
+    q = max((g.pressure_error.shape[1] for g in data.groups if g.has_input_error), default=0)
+    return sum(g.observed.size for g in data.groups) + data.n_error_sets * q
 
 
 _RESIDUALS = dense_jacobian(lambda u, args: _objective(u, *args)[0])
@@ -162,7 +170,7 @@ def gauss_newton_gain(spec: ModelSpec, start, data: DiscoveryData, current_cost:
     onto the span of the free parameters' Jacobian columns (a score statistic, used to rank candidates)."""
     u = to_unconstrained(start)
     jac, res = _jacobian(jnp.asarray(u), jnp.asarray(spec.mask), jnp.asarray(spec.pinned), data)
-    n = sum(g.observed.size for g in data.groups)
+    n = _n_data_residuals(data)
     jac, r = np.asarray(jac), np.asarray(res)[:n]
     j = jac[: r.size, spec.mask]
     if not (np.all(np.isfinite(j)) and np.all(np.isfinite(r))):

@@ -20,7 +20,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..inference.likelihood import OBSERVED, SOLVER_TOLERANCE, SPECIMEN_OFFSET, RunGroup, predict
+from ..inference.likelihood import (
+    OBSERVED,
+    SOLVER_TOLERANCE,
+    SPECIMEN_OFFSET,
+    RunGroup,
+    input_error_jacobian,
+    predict,
+)
 from ..physics import Geometry, ModelConfig
 from .effects import BASELINE_PARAMETERS, EXTRA_PARAMETERS, LIBRARY, check_effects, parameter_spec
 
@@ -122,7 +129,10 @@ class DiscoveryData:
     **Fields:** ``groups`` run groups whose ``specimen_index`` is the run's cycle index (0 = first run of its
     condition), ``sd`` per group (r, m) the noise sd of each bin mean [signal unit], ``session`` per group
     (r, m) each bin's time in the specimen's session scaled to [-1, 1] (the session baseline's argument),
-    ``geometry``.
+    ``geometry``. The fitted inputs' error (groups with :attr:`RunGroup.has_input_error`, whose rows carry the
+    (q, L) error columns of their condition's shared pressure): ``error_set`` per group (r,) int, the input
+    error set of each run (-1: none), ``informs`` per group (r,) 1 where the run's residuals estimate its set's
+    error (fitted runs) and 0 where they only take the estimate (held-out runs), ``n_error_sets``.
     """
 
     groups: tuple[RunGroup, ...]
@@ -130,10 +140,15 @@ class DiscoveryData:
     session: tuple
     n_cycles: int
     geometry: Geometry
+    error_set: tuple = ()
+    informs: tuple = ()
+    n_error_sets: int = 0
 
 
 jax.tree_util.register_dataclass(
-    DiscoveryData, data_fields=["groups", "sd", "session"], meta_fields=["n_cycles", "geometry"]
+    DiscoveryData,
+    data_fields=["groups", "sd", "session", "error_set", "informs"],
+    meta_fields=["n_cycles", "geometry", "n_error_sets"],
 )
 
 
@@ -143,7 +158,9 @@ def _legendre(s):
 
 
 def predictions(x, data: DiscoveryData):
-    """Per group: predicted signal (r, m), bin noise sd (r, m) and solver error (r,), at values ``x`` (d,)."""
+    """Per group: predicted signal (r, m) at the fitted inputs, bin noise sd (r, m), solver error (r,) and the
+    prediction's derivative (r, q, m) along each column of its inputs' error (``None`` for groups without), at
+    values ``x`` (d,)."""
     params = dict(zip(NAMES, x, strict=True))
     a = params.pop("cyclic_softening_fraction")
     offset, gain = params.pop("sensor_offset_n"), params.pop("sensor_gain")
@@ -152,13 +169,39 @@ def predictions(x, data: DiscoveryData):
     params[SPECIMEN_OFFSET] = jnp.log1p(a * jnp.exp(-jnp.arange(data.n_cycles, dtype=float)))
     out = []
     for group, sd, session in zip(data.groups, data.sd, data.session, strict=True):
-        predicted, error = predict(params, group, config=SUPERSET_CONFIG, geometry=data.geometry)
+        jac = None
+        if group.has_input_error:  # one simulated row per run in discovery data
+            predicted, error, jac = input_error_jacobian(params, group, config=SUPERSET_CONFIG, geometry=data.geometry)
+        else:
+            predicted, error = predict(params, group, config=SUPERSET_CONFIG, geometry=data.geometry)
         if group.test in FORCE_TESTS:
             drift = sum(c * p for c, p in zip(baseline, _legendre(jnp.asarray(session)), strict=True))
             predicted = gain * predicted + offset + drift
+            jac = None if jac is None else gain * jac
             sd = sd * (1.0 + slope * jnp.abs(predicted))
-        out.append((predicted, sd, error))
+        out.append((predicted, sd, error, jac))
     return out
+
+
+def _input_error_estimate(data: DiscoveryData, parts):
+    """The most probable error ``a`` (S, q) of each input error set given the informing runs' residuals, with
+    ``a ~ N(0, I_q)``: ``a = A^-1 b``, ``A = I + sum J^T W J``, ``b = sum J^T W e`` over the informing runs of
+    the set (``W`` inverse bin variances, ``e`` observed minus predicted). ``parts``: per group
+    ``(predicted, sd, jac)`` as from :func:`predictions`."""
+    q = next(jac.shape[1] for _, _, jac in parts if jac is not None)
+    gram = jnp.zeros((data.n_error_sets, q, q))
+    proj = jnp.zeros((data.n_error_sets, q))
+    rows = zip(data.groups, parts, data.error_set, data.informs, strict=True)
+    for group, (predicted, sd, jac), labels, informs in rows:
+        if jac is None:
+            continue
+        observed = jnp.asarray(group.observed)
+        measured = jnp.isfinite(observed)
+        weight = jnp.where(measured, 1.0 / sd**2, 0.0) * jnp.asarray(informs)[:, None]
+        residual = jnp.where(measured, observed - predicted, 0.0)
+        gram = gram.at[labels].add(jnp.einsum("rqm,rm,rpm->rqp", jac, weight, jac))
+        proj = proj.at[labels].add(jnp.einsum("rqm,rm,rm->rq", jac, weight, residual))
+    return jnp.linalg.solve(jnp.eye(q) + gram, proj[..., None])[..., 0]
 
 
 _LOG_2PI = math.log(2 * math.pi)
@@ -170,7 +213,15 @@ class Flat(NamedTuple):
     ``r`` standardized residual and ``log_sd`` log bin noise sd (both 0 where unmeasured); ``predicted`` signal
     and ``error`` observed minus predicted [signal unit] (NaN where unmeasured); ``loglik`` Gaussian
     log-likelihood (0 where unmeasured); ``solver_error`` () the largest solver error over all runs, in units
-    of its tolerance.
+    of its tolerance; ``input_error`` (S q,) the estimated error of each input error set, in its N(0, 1) units
+    (empty without).
+
+    Where runs carry their fitted inputs' error, predictions are made at the estimated input (the prediction
+    plus ``J a``, :func:`_input_error_estimate`), so residuals are what is left after the input's own error,
+    and the estimate's cost ``|a|^2 / 2`` is spread evenly over the informing runs' measured bins of ``loglik``
+    (so the fitted runs' sum is the profile log-likelihood over ``a``). This is the profile of the inference's
+    likelihood, which integrates ``a`` out exactly (their quadratic forms agree; the profile leaves out the
+    determinant, which hardly depends on the parameters).
     """
 
     r: jax.Array
@@ -179,30 +230,42 @@ class Flat(NamedTuple):
     error: jax.Array
     loglik: jax.Array
     solver_error: jax.Array
+    input_error: jax.Array
 
 
 def evaluate_flat(x, data: DiscoveryData) -> Flat:
     """Everything the fits and their scores read, from one simulation of every run at values ``x`` (d,)."""
-    rs, logs, preds, errors, measured_all, errs = [], [], [], [], [], []
-    for group, (predicted, sd, error) in zip(data.groups, predictions(x, data), strict=True):
+    parts = predictions(x, data)
+    estimate = _input_error_estimate(data, [p[:2] + p[3:] for p in parts]) if data.n_error_sets else jnp.zeros((0, 0))
+    # The cost |a|^2 / 2 of each set's estimate, per informing measured bin of that set.
+    per_bin = jnp.zeros(data.n_error_sets)
+    if data.n_error_sets:
+        bins = jnp.zeros(data.n_error_sets)
+        for group, labels, informs in zip(data.groups, data.error_set, data.informs, strict=True):
+            counted = jnp.sum(jnp.isfinite(jnp.asarray(group.observed)), axis=1) * jnp.asarray(informs)
+            bins = bins.at[labels].add(jnp.where(jnp.asarray(labels) >= 0, counted, 0.0))
+        per_bin = 0.5 * jnp.sum(estimate**2, axis=1) / jnp.maximum(bins, 1.0)
+    rs, logs, preds, errors, measured_all, costs, errs = [], [], [], [], [], [], []
+    for i, (group, (predicted, sd, error, jac)) in enumerate(zip(data.groups, parts, strict=True)):
         observed = jnp.asarray(group.observed)
         measured = jnp.isfinite(observed)
+        cost = jnp.zeros(observed.shape)
+        if jac is not None:
+            labels = jnp.asarray(data.error_set[i])
+            predicted = predicted + jnp.einsum("rqm,rq->rm", jac, estimate[labels])
+            cost = jnp.broadcast_to((per_bin[labels] * jnp.asarray(data.informs[i]))[:, None], observed.shape)
         rs.append(jnp.where(measured, (jnp.where(measured, observed, 0.0) - predicted) / sd, 0.0).ravel())
         logs.append(jnp.where(measured, jnp.log(sd), 0.0).ravel())
         preds.append(predicted.ravel())
         errors.append((observed - predicted).ravel())
         measured_all.append(measured.ravel())
+        costs.append(cost.ravel())
         errs.append(jnp.max(error / SOLVER_TOLERANCE[group.test]))
     r, log_sd, measured = jnp.concatenate(rs), jnp.concatenate(logs), jnp.concatenate(measured_all)
-    loglik = jnp.where(measured, -0.5 * r**2 - log_sd - 0.5 * _LOG_2PI, 0.0)
-    return Flat(r, log_sd, jnp.concatenate(preds), jnp.concatenate(errors), loglik, jnp.max(jnp.stack(errs)))
-
-
-def standardized(x, data: DiscoveryData):
-    """Flat standardized residuals (n,) (0 where unmeasured), ``log sd`` (n,) (0 where unmeasured), and the
-    largest solver error over all runs."""
-    flat = evaluate_flat(x, data)
-    return flat.r, flat.log_sd, flat.solver_error
+    loglik = jnp.where(measured, -0.5 * r**2 - log_sd - 0.5 * _LOG_2PI - jnp.concatenate(costs), 0.0)
+    return Flat(
+        r, log_sd, jnp.concatenate(preds), jnp.concatenate(errors), loglik, jnp.max(jnp.stack(errs)), estimate.ravel()
+    )
 
 
 __all__ = [
@@ -216,7 +279,6 @@ __all__ = [
     "evaluate_flat",
     "model_spec",
     "predictions",
-    "standardized",
     "to_unconstrained",
     "to_values",
     "values",
