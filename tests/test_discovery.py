@@ -814,14 +814,36 @@ def test_the_stroke_inputs_error_is_estimated_from_the_fitted_runs_as_the_infere
     a_matrix = np.eye(jac.shape[1]) + np.einsum("rqm,rm,rpm->qp", jac, w, jac)
     b = np.einsum("rqm,rm,rm->q", jac, w, e)
     estimate = np.linalg.solve(a_matrix, b)
+    # Tolerances: central differences at h = 0.01 column units and the simulation's solver (1e-9 relative).
     np.testing.assert_allclose(np.asarray(flat.input_error), estimate, rtol=1e-4, atol=1e-6)
     profiled = float(np.sum(np.asarray(flat.r) ** 2) + np.sum(np.asarray(flat.input_error) ** 2))
     integrated = float(np.sum(e**2 * w) - b @ estimate)
     np.testing.assert_allclose(profiled, integrated, rtol=1e-5)
     assert profiled < 0.9 * float(np.sum(e**2 * w))  # the ramp's error is visible at this noise: it matters
 
-    # Held-out runs take the estimate of the fitted ones, whatever they observed.
+    # The fitted runs' log-likelihood is the profile: its sum carries the estimate's cost |a|^2 / 2.
+    gauss = np.sum(-np.log(np.broadcast_to(sd, e.shape)) - 0.5 * np.log(2 * np.pi))
+    np.testing.assert_allclose(float(np.sum(flat.loglik)), -0.5 * integrated + gauss, rtol=1e-6)
+
+    # Held-out runs are predicted at the fitted runs' estimate, which they never inform.
     held = split.held_out.groups[0]
+    held_columns = np.asarray(held.pressure_error)
+    np.testing.assert_allclose(held_columns, columns[: held_columns.shape[0]], rtol=0, atol=0)
+    held_at = lambda pressure: np.asarray(  # noqa: E731
+        predictions(jax.numpy.asarray(x), replace(split.held_out, groups=(replace(held, pressure_pa=pressure),)))[0][0]
+    )
+    held_jac = np.stack(
+        [(held_at(held.pressure_pa + h * c) - held_at(held.pressure_pa - h * c))[0] / (2 * h) for c in held_columns[0]]
+    )  # (q, m): one held-out run
+    expected = held_at(held.pressure_pa)[0] + estimate @ held_jac
+    n_fit = split.n_fit_bins
+    both = _pointwise(jax.numpy.asarray(x), split.both)
+    scale = np.max(np.abs(estimate @ held_jac))
+    np.testing.assert_allclose(np.asarray(both.predicted)[n_fit:], expected, rtol=0, atol=1e-3 * scale)
+    assert scale > 0.3 * np.min(np.asarray(split.held_out.sd[0]))  # the correction is not negligible here
     moved = replace(split, held_out=replace(split.held_out, groups=(replace(held, observed=held.observed + 1e-3),)))
     for data in (split.both, moved.both):
         np.testing.assert_allclose(np.asarray(_pointwise(jax.numpy.asarray(x), data).input_error), estimate, rtol=1e-4)
+    # Alone, nothing informs the held-out runs' estimate: they are predicted at the fitted input.
+    alone = _pointwise(jax.numpy.asarray(x), split.held_out)
+    np.testing.assert_allclose(np.asarray(alone.input_error), 0.0, atol=0)

@@ -154,17 +154,27 @@ def fit_models(specs, starts, data: DiscoveryData) -> list[ModelFit | None]:
 @dataclass(frozen=True, eq=False)
 class Evaluation:
     """A fit on some data, per flat bin (n,): ``loglik``, standardized residual ``r``, ``predicted`` signal and
-    ``error`` observed minus predicted [signal unit]; ``solver_ok`` whether every simulation met its tolerance."""
+    ``error`` observed minus predicted [signal unit]; ``solver_ok`` whether every simulation met its tolerance;
+    ``input_error`` the estimated correction of the fitted inputs (:class:`~.model.Flat`), from the fitted runs.
+    """
 
     loglik: np.ndarray
     r: np.ndarray
     predicted: np.ndarray
     error: np.ndarray
     solver_ok: bool
+    input_error: np.ndarray
+
+    @property
+    def cost(self) -> float:
+        """Sum of squares the data set in the fit's objective: the standardized residuals and the input
+        correction (what :func:`gauss_newton_gain` compares against)."""
+        return float(np.sum(self.r**2) + np.sum(self.input_error**2))
 
 
 def gauss_newton_gain(spec: ModelSpec, start, data: DiscoveryData, current_cost: float) -> float:
-    """Decrease of the sum of squared standardized residuals, from ``current_cost`` (the current model's), that
+    """Decrease of the data's sum of squares (standardized residuals and the input correction,
+    :attr:`Evaluation.cost`), from ``current_cost`` (the current model's), that
     one Gauss-Newton step of ``spec`` from ``start`` (values (d,) [SI], near the new effect's off values)
     promises: ``current_cost - (|r|^2 - |P r|^2)`` with ``r`` the residuals at ``start`` and ``P`` the projection
     onto the span of the free parameters' Jacobian columns (a score statistic, used to rank candidates)."""
@@ -183,8 +193,8 @@ def evaluate(fit: ModelFit, split) -> tuple[Evaluation, Evaluation]:
     """Evaluate ``fit`` on the fitted and on the held-out runs of a :class:`~.data.SplitData`."""
     flat = _pointwise(jnp.asarray(fit.x), split.both)
     loglik, r, predicted, error = (np.asarray(a) for a in (flat.loglik, flat.r, flat.predicted, flat.error))
-    n, ok = split.n_fit_bins, bool(flat.solver_error <= 1.0)
-    part = lambda s: Evaluation(loglik[s], r[s], predicted[s], error[s], ok)  # noqa: E731
+    n, ok, a = split.n_fit_bins, bool(flat.solver_error <= 1.0), np.asarray(flat.input_error)
+    part = lambda s: Evaluation(loglik[s], r[s], predicted[s], error[s], ok, a)  # noqa: E731
     return part(slice(None, n)), part(slice(n, None))
 
 

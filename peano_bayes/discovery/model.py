@@ -132,7 +132,10 @@ class DiscoveryData:
     ``geometry``. The fitted inputs' error (groups with :attr:`RunGroup.has_input_error`, whose rows carry the
     (q, L) error columns of their condition's shared pressure): ``error_set`` per group (r,) int, the input
     error set of each run (-1: none), ``informs`` per group (r,) 1 where the run's residuals estimate its set's
-    error (fitted runs) and 0 where they only take the estimate (held-out runs), ``n_error_sets``.
+    error (fitted runs) and 0 where they only take the estimate (held-out runs), ``n_error_sets`` the number of
+    sets (conditions whose shared input carries an error; 0: inputs taken as exact). Held-out runs are
+    therefore evaluated together with the fitted ones (:attr:`~.data.SplitData.both`); alone, nothing informs
+    their estimate and they are predicted at the fitted input itself.
     """
 
     groups: tuple[RunGroup, ...]
@@ -159,8 +162,9 @@ def _legendre(s):
 
 def predictions(x, data: DiscoveryData):
     """Per group: predicted signal (r, m) at the fitted inputs, bin noise sd (r, m), solver error (r,) and the
-    prediction's derivative (r, q, m) along each column of its inputs' error (``None`` for groups without), at
-    values ``x`` (d,)."""
+    prediction's derivative (r, q, m) along each column of its inputs' error (``None`` for groups without, or
+    when ``data`` has no input error sets), at values ``x`` (d,). Every run of discovery data is its own
+    simulated row, so the derivative has one row per run."""
     params = dict(zip(NAMES, x, strict=True))
     a = params.pop("cyclic_softening_fraction")
     offset, gain = params.pop("sensor_offset_n"), params.pop("sensor_gain")
@@ -170,7 +174,7 @@ def predictions(x, data: DiscoveryData):
     out = []
     for group, sd, session in zip(data.groups, data.sd, data.session, strict=True):
         jac = None
-        if group.has_input_error:  # one simulated row per run in discovery data
+        if group.has_input_error and data.n_error_sets:
             predicted, error, jac = input_error_jacobian(params, group, config=SUPERSET_CONFIG, geometry=data.geometry)
         else:
             predicted, error = predict(params, group, config=SUPERSET_CONFIG, geometry=data.geometry)
@@ -184,11 +188,12 @@ def predictions(x, data: DiscoveryData):
 
 
 def _input_error_estimate(data: DiscoveryData, parts):
-    """The most probable error ``a`` (S, q) of each input error set given the informing runs' residuals, with
-    ``a ~ N(0, I_q)``: ``a = A^-1 b``, ``A = I + sum J^T W J``, ``b = sum J^T W e`` over the informing runs of
-    the set (``W`` inverse bin variances, ``e`` observed minus predicted). ``parts``: per group
+    """The most probable correction ``a`` (S, q) of each input error set's fitted input, in units of its error
+    columns (the input is taken as the fitted one plus ``B a``, ``a ~ N(0, I_q)``), given the informing runs'
+    residuals: ``a = A^-1 b``, ``A = I + sum J^T W J``, ``b = sum J^T W e`` over the informing runs of the set
+    (``W`` inverse bin variances, ``e`` observed minus predicted at the fitted input). ``parts``: per group
     ``(predicted, sd, jac)`` as from :func:`predictions`."""
-    q = next(jac.shape[1] for _, _, jac in parts if jac is not None)
+    q = max((jac.shape[1] for _, _, jac in parts if jac is not None), default=0)
     gram = jnp.zeros((data.n_error_sets, q, q))
     proj = jnp.zeros((data.n_error_sets, q))
     rows = zip(data.groups, parts, data.error_set, data.informs, strict=True)
@@ -213,15 +218,16 @@ class Flat(NamedTuple):
     ``r`` standardized residual and ``log_sd`` log bin noise sd (both 0 where unmeasured); ``predicted`` signal
     and ``error`` observed minus predicted [signal unit] (NaN where unmeasured); ``loglik`` Gaussian
     log-likelihood (0 where unmeasured); ``solver_error`` () the largest solver error over all runs, in units
-    of its tolerance; ``input_error`` (S q,) the estimated error of each input error set, in its N(0, 1) units
-    (empty without).
+    of its tolerance; ``input_error`` (S q,) the estimated correction of each input error set's fitted input,
+    in its N(0, 1) units (:func:`_input_error_estimate`; empty without).
 
     Where runs carry their fitted inputs' error, predictions are made at the estimated input (the prediction
-    plus ``J a``, :func:`_input_error_estimate`), so residuals are what is left after the input's own error,
-    and the estimate's cost ``|a|^2 / 2`` is spread evenly over the informing runs' measured bins of ``loglik``
-    (so the fitted runs' sum is the profile log-likelihood over ``a``). This is the profile of the inference's
-    likelihood, which integrates ``a`` out exactly (their quadratic forms agree; the profile leaves out the
-    determinant, which hardly depends on the parameters).
+    plus ``J a``), so residuals are what is left after the input's own error, and the estimate's cost
+    ``|a|^2 / 2`` is spread evenly over the informing runs' measured bins of ``loglik`` (so the fitted runs'
+    sum is the profile log-likelihood over ``a``). This is the profile of the inference's likelihood, which
+    integrates ``a`` out exactly: the quadratic forms agree, and the profile leaves out ``ln det A / 2``, which
+    depends on the parameters only through ``J``. Held-out runs are predicted at the estimate, without its own
+    uncertainty ``J A^-1 J^T``.
     """
 
     r: jax.Array

@@ -499,7 +499,7 @@ def discover(split: SplitData, *, base=DEFAULT_BASE, gates: Gates = Gates(), see
         present = dict(zip(NAMES, current.x, strict=True))
         specs = {e: model_spec(current.spec.active + (e,), present) for e in inactive}
         starts = {e: _start(current, e) for e in inactive}
-        cost = float(np.sum(cur_fit.r**2))
+        cost = cur_fit.cost
         gain = {
             e: gauss_newton_gain(specs[e], starts[e], split.fit, cost)
             for e in inactive
