@@ -8,7 +8,8 @@ among the tests its signature shows in (``Effect.shows_in``). The sampled model 
 holds what discovery added) or, without RESULTS, is the configured model (the prior's ``[config]``), which
 ``run`` samples without ``--discover`` and which discovery only adds to. With ``--discover OUT`` it runs the
 model choice of ``run --discover`` itself on each bundled file (discovery from the configured model on the
-fitted tests, :func:`peano_bayes.discovery.choice.choose_model`, seed 0; reports in ``OUT/<code>/``; a report
+fitted tests, :func:`peano_bayes.discovery.choice.choose_model`, seed 0, its base fit started at the prior's
+medians as ``run --discover`` does; reports in ``OUT/<code>/``; a report
 already there is read back instead of run again) and checks the model that choice would sample.
 
     python experiments/model_choice_bundled.py [RESULTS | --discover OUT]
@@ -44,12 +45,14 @@ def discovered(code: str, out: Path) -> tuple[list[str], set[str], dict]:
     """The fitted tests, the effects of the model ``run --discover`` samples, and discovery's record, for the
     bundled file ``code`` (discovery run into ``out/code`` unless its report is there already)."""
     dataset = select_tests(load(dataset_path(code)), DEFAULT_TESTS)
-    config = load_prior(code).config
+    prior = load_prior(code)
+    config = prior.config
     folder = out / code
     if (folder / "report.json").exists():
         choice = choice_from_report(config, json.loads((folder / "report.json").read_text()), folder)
     else:
-        choice = choose_model(dataset, config, folder, seed=0, log=lambda m: print(f"{code}: {m}", flush=True))
+        say = lambda m: print(f"{code}: {m}", flush=True)  # noqa: E731
+        choice = choose_model(dataset, config, folder, seed=0, log=say, centre=prior.median())
     record = {"verdict": choice.verdict, "named": list(choice.named), "adopted": list(choice.adopted)}
     return list(dataset.tests), set(effects_in(choice.config)), record
 

@@ -172,6 +172,12 @@ def report_markdown(report: dict) -> str:
     if report["noise_model"]:
         lines.append(f"\nThe sensor or noise model needed: {', '.join(report['noise_model'])} (not physics).")
     lines += ["", f"Base model: {' + '.join(report['base'])}. Final model: {' + '.join(report['final_model'])}.", ""]
+    if not report.get("base_converged", True):
+        lines += [
+            "The base model's least squares stopped at its step limit without converging: what the search adds "
+            "may stand for a misfit of the base fit itself. Start it nearer the data (a prior's medians).",
+            "",
+        ]
     lines += _absorbed_notes(report["final_model"])
     for i, step in enumerate(report["steps"], 1):
         ev = step["evidence"]

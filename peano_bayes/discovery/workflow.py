@@ -71,7 +71,7 @@ from ..physics import PARAMETERS
 from .data import Covariates, SplitData
 from .diagnose import SQUARED, Diagnosis, diagnose, signature_statistic, signature_weights
 from .effects import CONFUSABLE, FLEXIBLE_TERMS, LIBRARY, WIDENING_NOISE, check_effects
-from .fitting import Evaluation, ModelFit, evaluate, fit_models, gauss_newton_gain
+from .fitting import BATCH, Evaluation, ModelFit, evaluate, fit_models, gauss_newton_gain
 from .model import DEFAULT_BASE, NAMES, model_spec
 
 VERDICTS = ("named", "none", "ambiguous", "unexplained")
@@ -384,15 +384,23 @@ def _start(current: ModelFit, name: str) -> np.ndarray:
     return x
 
 
-def fit_base(base, fit_data, *, starts: int = Gates.base_starts, seed: int = 0) -> ModelFit:
+#: Continuations of a base fit's start that stopped at the step limit (each up to ``fitting.MAX_STEPS`` steps).
+BASE_CONTINUATIONS = 8
+
+
+def fit_base(base, fit_data, *, starts: int = Gates.base_starts, seed: int = 0, centre=None) -> ModelFit:
     """Least-squares fit of the model with effects ``base`` to ``fit_data`` (a :class:`SplitData`'s ``fit``).
 
-    Multi-start: the prior-median start plus ``starts - 1`` starts scattered by a factor e^N(0, 0.3) in each
-    free parameter (seeded by ``seed``); the lowest-cost fit wins. Raises RuntimeError if every start fails.
+    Multi-start from the library's nominal values, or from ``centre`` (name -> value [SI], e.g. a material
+    prior's medians; names outside the discovery model are ignored): that start plus ``starts - 1`` scattered by
+    a factor e^N(0, 0.3) in each free parameter (seeded by ``seed``), and with ``centre`` the nominal start as
+    well; a start stopped at the step limit continues (up to :data:`BASE_CONTINUATIONS` times) while it
+    improves; the lowest-cost fit wins. Raises RuntimeError if every start fails.
     """
-    spec = model_spec(base)
+    nominal = model_spec(base)
+    spec = nominal if centre is None else model_spec(base, {k: v for k, v in centre.items() if k in NAMES})
     rng = np.random.default_rng(seed)
-    x0 = [spec.pinned]
+    x0 = [spec.pinned] + ([] if centre is None else [nominal.pinned])
     for _ in range(starts - 1):
         x0.append(spec.pinned * np.where(spec.mask, np.exp(rng.normal(0.0, 0.3, spec.mask.size)), 1.0))
     x0 = [np.where(spec.mask, s, spec.pinned) for s in x0]
@@ -402,6 +410,20 @@ def fit_base(base, fit_data, *, starts: int = Gates.base_starts, seed: int = 0) 
     fits = [f for f in fit_models([spec] * len(x0), x0, fit_data) if f is not None]
     if not fits:
         raise RuntimeError(f"every fit of the base model {base} failed (non-finite or the physics solver missed)")
+    # A start that stopped at the step limit goes on from where it stopped (the same compiled solve, up to BATCH
+    # at a time), while it still improves: a base far from the library's values needs several hundred steps.
+    going = sorted(range(len(fits)), key=lambda i: fits[i].cost)
+    for _ in range(BASE_CONTINUATIONS):
+        going = [i for i in going if not fits[i].converged][:BATCH]
+        if not going:
+            break
+        more = fit_models([fits[i].spec for i in going], [fits[i].x for i in going], fit_data)
+        improved = []
+        for i, new in zip(going, more, strict=True):
+            if new is not None and new.cost < fits[i].cost - 1e-6 * max(1.0, fits[i].cost):
+                fits[i] = new
+                improved.append(i)
+        going = improved
     return min(fits, key=lambda f: f.cost)
 
 
@@ -466,8 +488,11 @@ class Discovery:
     held_after: Evaluation
 
 
-def discover(split: SplitData, *, base=DEFAULT_BASE, gates: Gates = Gates(), seed: int = 0, progress=None) -> Discovery:
-    """Run the discovery loop on ``split`` (see :func:`~peano_bayes.discovery.data.discovery_data`).
+def discover(
+    split: SplitData, *, base=DEFAULT_BASE, gates: Gates = Gates(), seed: int = 0, progress=None, centre=None
+) -> Discovery:
+    """Run the discovery loop on ``split`` (see :func:`~peano_bayes.discovery.data.discovery_data`); ``centre``
+    (name -> value [SI], e.g. the material prior's medians) centres the base fit's starts (:func:`fit_base`).
 
     The report (:attr:`Discovery.report`) is a JSON-ready dict: ``verdict`` (one of :data:`VERDICTS`),
     ``named`` physics effects, ``noise_model`` noise-side effects, ``described`` flexible terms the data needed,
@@ -481,7 +506,7 @@ def discover(split: SplitData, *, base=DEFAULT_BASE, gates: Gates = Gates(), see
     say = progress or (lambda line: None)
     started = time.perf_counter()
     base = check_effects(base)
-    current = fit_base(base, split.fit, starts=gates.base_starts, seed=seed)
+    current = fit_base(base, split.fit, starts=gates.base_starts, seed=seed, centre=centre)
     base_fit = current
     cur_fit, cur_held = evaluate(current, split)
     first_fit, first_held = cur_fit, cur_held
@@ -595,6 +620,7 @@ def discover(split: SplitData, *, base=DEFAULT_BASE, gates: Gates = Gates(), see
         "diagnoses": diagnoses,
         "gap": {"before": gap_table(first_fit, first_held, split), "after": gap_table(cur_fit, cur_held, split)},
         "base_parameters": {p: base_fit.params[p] for p in base_fit.spec.free_names},
+        "base_converged": base_fit.converged,
         "final_parameters": {p: {"value": current.params[p], "sd": current.sd.get(p)} for p in current.spec.free_names},
         "gates": asdict(gates),
         "seconds": time.perf_counter() - started,
