@@ -847,3 +847,35 @@ def test_the_stroke_inputs_error_is_estimated_from_the_fitted_runs_as_the_infere
     # Alone, nothing informs the held-out runs' estimate: they are predicted at the fitted input.
     alone = _pointwise(jax.numpy.asarray(x), split.held_out)
     np.testing.assert_allclose(np.asarray(alone.input_error), 0.0, atol=0)
+
+
+def test_a_base_fit_stopped_at_the_step_limit_goes_on_while_it_improves(monkeypatch):
+    """A start whose least squares stops unconverged is solved again from where it stopped, best first, until
+    it converges or stops improving; converged starts are not touched; ``centre`` adds its own start to the
+    nominal one."""
+    import peano_bayes.discovery.workflow as workflow
+
+    calls = []
+    # A fake solver: from x[0] = v it gets to v / 2 (cost v), converged once below 1.
+    index = NAMES.index("bending_k1_n")
+
+    def fake_fit_models(specs, starts, data):
+        calls.append([float(s[index]) for s in starts])
+        out = []
+        for spec, s in zip(specs, starts, strict=True):
+            x = np.array(s, dtype=float)
+            x[index] = s[index] / 2.0
+            out.append(ModelFit(spec, x, x, float(x[index]), bool(x[index] < 1.0), {}, np.eye(1)))
+        return out
+
+    monkeypatch.setattr(workflow, "fit_models", fake_fit_models)
+    centre = {"bending_k1_n": 40.0, "not_a_discovery_parameter": 1.0}
+    best = workflow.fit_base(DEFAULT_BASE, None, starts=2, seed=0, centre=centre)
+    nominal = model_spec(DEFAULT_BASE).pinned[index]
+    assert calls[0][:2] == [40.0, nominal] and len(calls[0]) == 3  # the centre, the nominal, one scattered
+    assert best.converged and best.cost < 1.0
+    assert 20.0 in calls[1] and any(1.25 in c for c in calls)  # the centre's start went on: 20, 10, ..., 1.25
+    # Every later round continues the unconverged starts, best first, from where the last round left them.
+    for before, after in zip(calls[:-1], calls[1:], strict=True):
+        assert after == sorted(v / 2.0 for v in before if v / 2.0 >= 1.0)[: len(after)]
+    assert len(calls) <= 1 + workflow.BASE_CONTINUATIONS
