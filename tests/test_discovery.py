@@ -851,8 +851,8 @@ def test_the_stroke_inputs_error_is_estimated_from_the_fitted_runs_as_the_infere
 
 def test_a_base_fit_stopped_at_the_step_limit_goes_on_while_it_improves(monkeypatch):
     """A start whose least squares stops unconverged is solved again from where it stopped, best first, until
-    it converges or stops improving; converged starts are not touched; ``centre`` adds its own start to the
-    nominal one."""
+    it converges or stops improving; converged starts are not touched; ``centre`` adds its own starts to the
+    nominal ones."""
     import peano_bayes.discovery.workflow as workflow
 
     calls = []
@@ -872,7 +872,7 @@ def test_a_base_fit_stopped_at_the_step_limit_goes_on_while_it_improves(monkeypa
     centre = {"bending_k1_n": 40.0, "not_a_discovery_parameter": 1.0}
     best = workflow.fit_base(DEFAULT_BASE, None, starts=2, seed=0, centre=centre)
     nominal = model_spec(DEFAULT_BASE).pinned[index]
-    assert calls[0][:2] == [40.0, nominal] and len(calls[0]) == 3  # the centre, the nominal, one scattered
+    assert calls[0][0] == nominal and calls[0][2] == 40.0 and len(calls[0]) == 4  # nominal, one scattered; centre
     assert best.converged and best.cost < 1.0
     assert 20.0 in calls[1] and any(1.25 in c for c in calls)  # the centre's start went on: 20, 10, ..., 1.25
     # Every later round continues the unconverged starts, best first, from where the last round left them.

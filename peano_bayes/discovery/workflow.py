@@ -391,18 +391,21 @@ BASE_CONTINUATIONS = 8
 def fit_base(base, fit_data, *, starts: int = Gates.base_starts, seed: int = 0, centre=None) -> ModelFit:
     """Least-squares fit of the model with effects ``base`` to ``fit_data`` (a :class:`SplitData`'s ``fit``).
 
-    Multi-start from the library's nominal values, or from ``centre`` (name -> value [SI], e.g. a material
-    prior's medians; names outside the discovery model are ignored): that start plus ``starts - 1`` scattered by
-    a factor e^N(0, 0.3) in each free parameter (seeded by ``seed``), and with ``centre`` the nominal start as
-    well; a start stopped at the step limit continues (up to :data:`BASE_CONTINUATIONS` times) while it
+    Multi-start: the library's nominal values plus ``starts - 1`` starts scattered by a factor e^N(0, 0.3) in
+    each free parameter (seeded by ``seed``), and with ``centre`` (name -> value [SI], e.g. a material prior's
+    medians; names outside the discovery model are ignored) as many again around it; a start stopped at the step limit continues (up to :data:`BASE_CONTINUATIONS` times) while it
     improves; the lowest-cost fit wins. Raises RuntimeError if every start fails.
     """
-    nominal = model_spec(base)
-    spec = nominal if centre is None else model_spec(base, {k: v for k, v in centre.items() if k in NAMES})
+    spec = model_spec(base)
     rng = np.random.default_rng(seed)
-    x0 = [spec.pinned] + ([] if centre is None else [nominal.pinned])
+    x0 = [spec.pinned]
     for _ in range(starts - 1):
         x0.append(spec.pinned * np.where(spec.mask, np.exp(rng.normal(0.0, 0.3, spec.mask.size)), 1.0))
+    if centre is not None:  # as many starts again, around the centre (the nominal ones above are unchanged)
+        near = model_spec(base, {k: v for k, v in centre.items() if k in NAMES}).pinned
+        x0.append(near)
+        for _ in range(starts - 1):
+            x0.append(near * np.where(spec.mask, np.exp(rng.normal(0.0, 0.3, spec.mask.size)), 1.0))
     x0 = [np.where(spec.mask, s, spec.pinned) for s in x0]
     i = NAMES.index("length_fraction")
     for s in x0:
