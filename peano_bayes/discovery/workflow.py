@@ -393,8 +393,9 @@ def fit_base(base, fit_data, *, starts: int = Gates.base_starts, seed: int = 0, 
 
     Multi-start: the library's nominal values plus ``starts - 1`` starts scattered by a factor e^N(0, 0.3) in
     each free parameter (seeded by ``seed``), and with ``centre`` (name -> value [SI], e.g. a material prior's
-    medians; names outside the discovery model are ignored) as many again around it; a start stopped at the step limit continues (up to :data:`BASE_CONTINUATIONS` times) while it
-    improves; the lowest-cost fit wins. Raises RuntimeError if every start fails.
+    medians; names outside the discovery model are ignored) as many again around it. A start stopped at the
+    step limit continues (up to :data:`BASE_CONTINUATIONS` times) while it improves; the lowest-cost fit wins.
+    Raises RuntimeError if every start fails.
     """
     spec = model_spec(base)
     rng = np.random.default_rng(seed)
