@@ -1,6 +1,6 @@
 """Why the SBC intervals under-cover: the likelihood's model error, replicate by replicate.
 
-    python experiments/sbc_model_error.py [--study experiments/sbc_exact_inputs]
+    python experiments/sbc_model_error.py --study STUDY   # a one-specimen study (experiments/sbc.py --out STUDY)
 
 For every replicate of a finished SBC study (``experiments/sbc.py``; its ``replicates.jsonl``) this rebuilds
 the replicate's truth and rig data exactly (same root seed, index and redraws; the truth is checked against the
@@ -92,7 +92,7 @@ def predicted_coverage(z: np.ndarray, level: float) -> np.ndarray:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--study", type=Path, default=HERE / "sbc_exact_inputs")
+    parser.add_argument("--study", type=Path, required=True, help="a finished one-specimen SBC study folder")
     args = parser.parse_args(argv)
     path = args.study / "replicates.jsonl"
     if not path.exists():
