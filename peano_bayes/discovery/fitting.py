@@ -11,7 +11,7 @@ values and data are arguments.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import jax
 import jax.numpy as jnp
@@ -163,7 +163,7 @@ class Evaluation:
     predicted: np.ndarray
     error: np.ndarray
     solver_ok: bool
-    input_error: np.ndarray
+    input_error: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def cost(self) -> float:
