@@ -172,11 +172,10 @@ def walker_start(posterior, fitted: dict) -> tuple[np.ndarray, np.ndarray]:
     return centre, cov
 
 
-def _model_choice(dataset: Dataset, prior, out: Path, *, discover: bool, resume: bool, seed: int, log):
-    """The model a fit samples: ``prior.config``, or with ``discover`` that plus what discovery names on the
-    data (its report in ``out/discovery``; its base fit starts at the prior's medians). On ``resume`` the model
-    of the saved fit: the report's if there is one, else ``prior.config``."""
-    config = prior.config
+def _model_choice(dataset: Dataset, config, out: Path, *, discover: bool, resume: bool, seed: int, log, centre=None):
+    """The model a fit samples: ``config``, or with ``discover`` ``config`` plus what discovery names on the
+    data (its report in ``out/discovery``; its base fit also starts around ``centre``, name -> value [SI], the
+    prior's medians). On ``resume`` the model of the saved fit: the report's if there is one, else ``config``."""
     from .discovery.choice import choice_from_report, choose_model, configured_model, effects_in
 
     folder = out / "discovery"
@@ -198,7 +197,7 @@ def _model_choice(dataset: Dataset, prior, out: Path, *, discover: bool, resume:
         log(f"{code}: discovery from the configured model ({' + '.join(effects_in(config))}) ...")
         # the dataset holds the fitted tests only; discovery reads its first specimen's
         say = lambda m: log(f"{code}: discovery: {m}")  # noqa: E731
-        choice = choose_model(dataset, config, folder, seed=seed, log=say, centre=prior.median())
+        choice = choose_model(dataset, config, folder, seed=seed, log=say, centre=centre)
     added = ", ".join(choice.adopted) or "nothing"
     log(f"{code}: discovery verdict {choice.verdict}; named {', '.join(choice.named) or 'none'}; added {added}")
     if choice.not_in_model:
@@ -254,7 +253,16 @@ def infer(
     code = dataset.material.code
     whole_prior = prior_of(dataset, prior)
     out = Path(out_dir) / _check_label(_default_label(dataset) if label is None else label)
-    choice = _model_choice(dataset, whole_prior, out, discover=discover, resume=resume, seed=seed, log=log)
+    choice = _model_choice(
+        dataset,
+        whole_prior.config,
+        out,
+        discover=discover,
+        resume=resume,
+        seed=seed,
+        log=log,
+        centre=whole_prior.median(),
+    )
     if any(r.added_compliance > 0 for r in dataset.runs) and not choice.config.mount:
         # runs on a second, known mount only make sense with the mount in the model: they are there to measure it
         log(f"{code}: some runs carry an added mount compliance, so the model includes the mount")

@@ -560,20 +560,45 @@ def test_a_significant_signature_reaches_every_candidate_the_registry_lists_for_
     significant adds nothing beyond the screen's top few; the report names each candidate's failed gates."""
     from types import SimpleNamespace
 
-    inactive = ["hysteresis", "viscoelastic_relaxation", "series_compliance", "sensor_offset", "sensor_gain",
-                "threshold_pressure", "strain_stiffening", "heteroscedastic_noise", "session_baseline"]
+    inactive = [
+        "hysteresis",
+        "viscoelastic_relaxation",
+        "series_compliance",
+        "sensor_offset",
+        "sensor_gain",
+        "threshold_pressure",
+        "strain_stiffening",
+        "heteroscedastic_noise",
+        "session_baseline",
+    ]
     gates = Gates(screen=2, alpha=0.01)
-    gain = {"series_compliance": 9.0, "sensor_offset": 7.0, "sensor_gain": 5.0, "threshold_pressure": 3.0,
-            "strain_stiffening": 1.0, "hysteresis": 0.0, "viscoelastic_relaxation": 0.0}
+    gain = {
+        "series_compliance": 9.0,
+        "sensor_offset": 7.0,
+        "sensor_gain": 5.0,
+        "threshold_pressure": 3.0,
+        "strain_stiffening": 1.0,
+        "hysteresis": 0.0,
+        "viscoelastic_relaxation": 0.0,
+    }
     quiet = {"loading_split": 0.2, "noise_level": 0.5, "force_level": 0.3}
     ranked, by_signature = refit_candidates(inactive, gain, quiet, gates)
     assert ranked == ["series_compliance", "sensor_offset", "session_baseline"] and by_signature == {}
     loud = {**quiet, "loading_split": 1e-4, "noise_level": 0.003, "relaxation": 0.002}
     ranked, by_signature = refit_candidates(inactive, gain, loud, gates)
-    assert ranked == ["series_compliance", "sensor_offset", "hysteresis", "heteroscedastic_noise",
-                      "viscoelastic_relaxation", "session_baseline"]
-    assert by_signature == {"loading_split": ["hysteresis"], "noise_level": ["heteroscedastic_noise"],
-                            "relaxation": ["viscoelastic_relaxation"]}
+    assert ranked == [
+        "series_compliance",
+        "sensor_offset",
+        "hysteresis",
+        "heteroscedastic_noise",
+        "viscoelastic_relaxation",
+        "session_baseline",
+    ]
+    assert by_signature == {
+        "loading_split": ["hysteresis"],
+        "noise_level": ["heteroscedastic_noise"],
+        "relaxation": ["viscoelastic_relaxation"],
+    }
     scored = [SimpleNamespace(name="hysteresis", evidence={"gates": {"parsimony": False, "identified": True}})]
     outcomes = signature_outcomes(by_signature, loud, scored)
     assert outcomes["loading_split"] == {"p_holm": 1e-4, "candidates": {"hysteresis": ["parsimony"]}}
@@ -597,8 +622,12 @@ def test_drift_is_claimed_only_where_a_conditions_repeats_trend_in_time():
     bins = 40
     run = np.repeat(np.arange(pressures.size), bins)
     session = np.arange(run.size) * 0.5  # s
-    cov = SimpleNamespace(test=np.full(run.size, "load_cycle"), run=run, session_s=session,
-                          pressure_pa=np.repeat(pressures, bins) * (1 + 1e-3 * rng.standard_normal(run.size)))
+    cov = SimpleNamespace(
+        test=np.full(run.size, "load_cycle"),
+        run=run,
+        session_s=session,
+        pressure_pa=np.repeat(pressures, bins) * (1 + 1e-3 * rng.standard_normal(run.size)),
+    )
     noise = rng.standard_normal(run.size)
     by_pressure = within_condition_trend(noise + 2.0 * (np.repeat(pressures, bins) / 200e3), cov, 0.01)
     assert by_pressure["conditions"] == 4 and by_pressure["runs"] == 12 and by_pressure["df"] == 7
@@ -682,8 +711,17 @@ def test_report_names_close_calls_outside_the_confusable_pairs():
     text = report_markdown(report)
     assert "predicted the held-out runs as well within two standard errors: series_compliance" in text
     assert "residuals are consistent with noise in every" not in text and "**not** consistent" not in text
-    gap_after = {"load_cycle": {p: {**gap["load_cycle"][p], "noise_floor_rmse": 0.2, "excess_rmse": 0.5,
-                                    "consistent_with_noise": p == "fit"} for p in ("fit", "held_out")}}
+    gap_after = {
+        "load_cycle": {
+            p: {
+                **gap["load_cycle"][p],
+                "noise_floor_rmse": 0.2,
+                "excess_rmse": 0.5,
+                "consistent_with_noise": p == "fit",
+            }
+            for p in ("fit", "held_out")
+        }
+    }
     noted = report_markdown({**report, "gap": {"before": gap, "after": gap_after}})
     assert "| load_cycle | held-out | 1 | 1 | 0.2 | n/a | 0.5 | no |" in noted
     assert "**not** consistent with noise in: load_cycle (held-out)" in noted
