@@ -1,6 +1,6 @@
 """Simulation-based calibration of the inference chain: coverage table and rank histograms.
 
-    python experiments/sbc.py [--replicates 100] [--out experiments/sbc] [--seed 20261123] [--walkers 16]
+    python experiments/sbc.py [--replicates 100] [--out OUT] [--seed 20261123] [--walkers 16]
                               [--exact-inputs] [--specimens N]
                               [--jobs N | --scheduler local:N | --scheduler tcp://HOST:8786]
 
