@@ -48,7 +48,7 @@ import numpy as np
 from ..data import Dataset
 from ..errors import PeanoBayesInputError
 from ..inference.denoise import noise_sd
-from ..inference.likelihood import _ERROR_RANK_TOLERANCE, OBSERVED, RunGroup, prepare
+from ..inference.likelihood import OBSERVED, RunGroup, mean_error_factor, prepare
 from .model import DiscoveryData
 
 #: Samples per bin by test for discovery (coarser than inference: screening many refits must be fast).
@@ -160,12 +160,7 @@ def _condition_input_error(group: RunGroup, conditions: list) -> list:
     index: dict = {}
     labels = np.array([index.setdefault(c, len(index)) for c in conditions])
     error = np.asarray(group.pressure_error, dtype=float)  # (r, q, L): each run's own columns, zero-padded
-    factors = []
-    for label in range(len(index)):
-        stacked = np.concatenate(list(error[labels == label]), axis=0).T / np.sum(labels == label)
-        left, values, _ = np.linalg.svd(stacked, full_matrices=False)
-        keep = values > np.sqrt(_ERROR_RANK_TOLERANCE) * max(values.max(initial=0.0), 1e-300)
-        factors.append((left[:, keep] * values[keep]).T)
+    factors = [mean_error_factor([b.T for b in error[labels == label]], error.shape[2]) for label in range(len(index))]
     return [factors[label] for label in labels]
 
 

@@ -192,12 +192,12 @@ def _input_error_estimate(data: DiscoveryData, parts):
     columns (the input is taken as the fitted one plus ``B a``, ``a ~ N(0, I_q)``), given the informing runs'
     residuals: ``a = A^-1 b``, ``A = I + sum J^T W J``, ``b = sum J^T W e`` over the informing runs of the set
     (``W`` inverse bin variances, ``e`` observed minus predicted at the fitted input). ``parts``: per group
-    ``(predicted, sd, jac)`` as from :func:`predictions`."""
-    q = max((jac.shape[1] for _, _, jac in parts if jac is not None), default=0)
+    ``(predicted, sd, solver error, jac)`` as from :func:`predictions`."""
+    q = max((jac.shape[1] for *_, jac in parts if jac is not None), default=0)
     gram = jnp.zeros((data.n_error_sets, q, q))
     proj = jnp.zeros((data.n_error_sets, q))
     rows = zip(data.groups, parts, data.error_set, data.informs, strict=True)
-    for group, (predicted, sd, jac), labels, informs in rows:
+    for group, (predicted, sd, _, jac), labels, informs in rows:
         if jac is None:
             continue
         observed = jnp.asarray(group.observed)
@@ -242,15 +242,13 @@ class Flat(NamedTuple):
 def evaluate_flat(x, data: DiscoveryData) -> Flat:
     """Everything the fits and their scores read, from one simulation of every run at values ``x`` (d,)."""
     parts = predictions(x, data)
-    estimate = _input_error_estimate(data, [p[:2] + p[3:] for p in parts]) if data.n_error_sets else jnp.zeros((0, 0))
+    estimate = _input_error_estimate(data, parts) if data.n_error_sets else jnp.zeros((0, 0))
     # The cost |a|^2 / 2 of each set's estimate, per informing measured bin of that set.
-    per_bin = jnp.zeros(data.n_error_sets)
-    if data.n_error_sets:
-        bins = jnp.zeros(data.n_error_sets)
-        for group, labels, informs in zip(data.groups, data.error_set, data.informs, strict=True):
-            counted = jnp.sum(jnp.isfinite(jnp.asarray(group.observed)), axis=1) * jnp.asarray(informs)
-            bins = bins.at[labels].add(jnp.where(jnp.asarray(labels) >= 0, counted, 0.0))
-        per_bin = 0.5 * jnp.sum(estimate**2, axis=1) / jnp.maximum(bins, 1.0)
+    bins = jnp.zeros(data.n_error_sets)
+    for (*_, jac), group, labels, informs in zip(parts, data.groups, data.error_set, data.informs, strict=True):
+        if jac is not None:
+            bins = bins.at[labels].add(jnp.sum(jnp.isfinite(jnp.asarray(group.observed)), axis=1) * informs)
+    per_bin = 0.5 * jnp.sum(estimate**2, axis=1) / jnp.maximum(bins, 1.0) if data.n_error_sets else bins
     rs, logs, preds, errors, measured_all, costs, errs = [], [], [], [], [], [], []
     for i, (group, (predicted, sd, error, jac)) in enumerate(zip(data.groups, parts, strict=True)):
         observed = jnp.asarray(group.observed)

@@ -458,16 +458,22 @@ def _reduce_run(
     return out
 
 
-def _shared_input_error(bases: list[dict], name: str, points: int) -> np.ndarray:
-    """(q, points) columns of the error of the mean of the runs' fitted input ``name`` (each run's error
-    ``B_i a_i``, independent; ``bases`` hold each run's ``B_i`` (points, q_i)): the exact low-rank factor of
-    ``sum_i B_i B_i^T / n^2``."""
-    stacked = np.concatenate([b.get(name, np.zeros((points, 0))) for b in bases], axis=1) / len(bases)
+def mean_error_factor(columns: list[np.ndarray], points: int) -> np.ndarray:
+    """(q, points) columns of the error of the mean of n runs' fitted input, each run's error ``B_i a_i``
+    independent with ``columns[i]`` = ``B_i`` (points, q_i) (zero columns allowed): the exact low-rank factor
+    of ``sum_i B_i B_i^T / n^2`` (eigenvalues below :data:`_ERROR_RANK_TOLERANCE` of the largest dropped)."""
+    stacked = np.concatenate([np.zeros((points, 0)), *columns], axis=1) / max(len(columns), 1)
     if stacked.shape[1] == 0:
         return np.zeros((0, points))
     left, values, _ = np.linalg.svd(stacked, full_matrices=False)
     keep = values > np.sqrt(_ERROR_RANK_TOLERANCE) * max(values.max(), 1e-300)
     return (left[:, keep] * values[keep]).T
+
+
+def _shared_input_error(bases: list[dict], name: str, points: int) -> np.ndarray:
+    """(q, points) columns of the error of the mean of the runs' fitted input ``name`` (``bases`` hold each
+    run's ``B_i`` (points, q_i) by input name; see :func:`mean_error_factor`)."""
+    return mean_error_factor([b.get(name, np.zeros((points, 0))) for b in bases], points)
 
 
 def _group_input_error(members: list, shared: np.ndarray, n_sets: int) -> dict:
@@ -868,6 +874,7 @@ __all__ = [
     "bin_noise_sd",
     "group_log_likelihood",
     "input_error_jacobian",
+    "mean_error_factor",
     "log_likelihood",
     "pointwise_log_likelihood",
     "predict",
