@@ -1,10 +1,10 @@
-"""Cost of integrating the fitted inputs' error out of the likelihood (``likelihood.INPUT_ERROR_TESTS``): the
-log posterior of a bundled material's load cycles, blocking and stroke tests with the stroke test's input error
-(ours) and with the inputs treated as exact (the reference, ``prepare(..., input_errors=frozenset())``), side by
-side in one process: compile time and evaluations per second of the batched log posterior (the sampler's) and
-compile time and calls per second of its value and gradient (what the mode's search would cost with the input
-error in; the package's ``Posterior.value_and_grad`` treats the inputs as exact for that reason). The last line
-printed is one JSON object with the ratios ours / reference.
+"""Cost of integrating the fitted inputs' error out of the likelihood (``likelihood.INPUT_ERROR_TESTS``): the log
+posterior of a bundled material's load cycles, blocking and stroke tests with the fitted inputs' error of every test
+in ``INPUT_ERROR_TESTS`` integrated out (ours) and with the inputs treated as exact (the reference, ``prepare(...,
+input_errors=frozenset())``), side by side in one process: compile time and evaluations per second of the batched
+log posterior (the sampler's) and compile time and calls per second of its value and gradient (what the mode's
+search would cost with the input error in; the package's ``Posterior.value_and_grad`` treats the inputs as exact for
+that reason). The last line printed is one JSON object with the ratios ours / reference.
 
 Evaluated at the material's generating values. Timings on a shared machine vary by 10-20 % between runs: run
 it on an otherwise idle core (``taskset -c 1``).

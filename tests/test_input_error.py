@@ -117,3 +117,51 @@ def test_input_jacobian_matches_finite_differences_and_whitens_the_truths_residu
     u = np.concatenate([np.asarray(jac)[0].T] * 3)
     dense = stats.multivariate_normal(np.zeros(residual.size), np.diag(scale.ravel() ** 2) + u @ u.T)
     assert float(ll.sum()) == pytest.approx(dense.logpdf(residual), rel=1e-9)
+
+
+@pytest.fixture(scope="module")
+def load_cycles():
+    """TP load cycles at the nominal parameters, one specimen, two repeats of each pressure (sharing a
+    simulation), 20 bins per segment."""
+    dataset = simulate_dataset("TP", None, seed=8, specimens=1, repeats=2, noise=RigNoise(), tests=("load_cycle",))
+    obs = prepare(dataset, bins_per_segment={"load_cycle": 20})
+    (own,) = json.loads(dataset.provenance["specimen_parameters"]).values()
+    params = {k: jnp.asarray(v) for k, v in own.items()}
+    return obs, {**params, "noise_load_cycle_force_n": jnp.asarray(RigNoise().force_sd_n)}
+
+
+def test_load_cycles_carry_their_strain_and_pressure_error_and_integrate_it_exactly(load_cycles):
+    """The load cycle's imposed strain and its pressure are both fitted inputs: both carry error columns, the
+    Jacobian along a strain column is the finite difference of the simulation, and the group's log-likelihood
+    is the dense Gaussian of each shared simulation's runs (covariance D + (1 J)(1 J)^T)."""
+    obs, params = load_cycles
+    model = {k: v for k, v in params.items() if k != "noise_load_cycle_force_n"}
+    for group in obs.groups:
+        assert group.has_input_error
+        strain_cols = np.abs(np.asarray(group.strain_error)).max(axis=2) > 0  # (u, q)
+        pressure_cols = np.abs(np.asarray(group.pressure_error)).max(axis=2) > 0
+        assert strain_cols.any(axis=1).all() and pressure_cols.any(axis=1).all()
+        assert not (strain_cols & pressure_cols).any()  # each column perturbs one input
+    group = obs.groups[0]
+    _, _, jac = input_error_jacobian(model, group, geometry=obs.geometry)
+    column = int(np.flatnonzero(np.abs(np.asarray(group.strain_error[0])).max(axis=1) > 0)[0])
+    h = 1e-2  # a hundredth of one sd of the fit's error along this column
+
+    def moved(sign):
+        g = replace(group, strain=group.strain + sign * h * group.strain_error[:, column])
+        return np.asarray(input_error_jacobian(model, g, geometry=obs.geometry)[0])
+
+    fd = (moved(1.0) - moved(-1.0)) / (2.0 * h)
+    np.testing.assert_allclose(np.asarray(jac)[:, column], fd, rtol=1e-3, atol=1e-4 * np.abs(fd).max())
+    assert np.abs(fd).max() > 0.0
+
+    white = whitened_residuals(params, group, geometry=obs.geometry)
+    assert np.all(np.isfinite(white)) and 0.8 < float(np.sqrt(np.mean(white**2))) < 1.2
+    predicted, scale, ll = (np.asarray(a) for a in group_log_likelihood(params, group, geometry=obs.geometry))
+    shared = np.asarray(group.shared)
+    for j in range(group.specimen_index.shape[0]):
+        rows = np.flatnonzero(shared == j)
+        residual = (np.asarray(group.observed)[rows] - predicted[rows]).ravel()
+        u = np.concatenate([np.asarray(jac)[j].T] * rows.size)
+        dense = stats.multivariate_normal(np.zeros(residual.size), np.diag(scale[rows].ravel() ** 2) + u @ u.T)
+        assert float(ll[rows].sum()) == pytest.approx(dense.logpdf(residual), rel=1e-9)

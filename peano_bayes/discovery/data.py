@@ -24,7 +24,7 @@ better input: with each run's own pressure that error blurs the onset of a thres
 benchmark's threshold-pressure data, named in 10 of 22 runs with each run's pressure, 13 of 22 with the
 average).
 Held-out runs share the average too; it uses their pressure inputs, never their observed force or strain.
-In the stroke test (:data:`~peano_bayes.inference.likelihood.INPUT_ERROR_TESTS`) the averaged ramp keeps its
+In the stroke test (:data:`DISCOVERY_INPUT_ERRORS`) the averaged ramp keeps its
 own error: the exact factor of the mean of the runs' fit errors, which every fit estimates from the fitted
 runs and the held-out runs take (:class:`.model.Flat`).
 
@@ -55,6 +55,13 @@ from .model import DiscoveryData
 DISCOVERY_BIN_SIZES = MappingProxyType({"load_cycle": 4, "blocking": 4, "stroke": 4, "step": 2})
 #: Tests simulated at every sample, their predictions averaged per bin (see the module docstring, **Bins**).
 DISCOVERY_EVERY_SAMPLE = frozenset({"blocking", "stroke"})
+#: Tests whose fitted inputs' error discovery's fits estimate (see the module docstring): the stroke test's
+#: pressure ramp, whose error moves a strain measured to 2e-4 by up to three bin sd. Discovery compares refits
+#: against each other and screens hundreds of them, so the load cycles and blocking tests, where the error is
+#: within noise per bin (:data:`~peano_bayes.inference.likelihood.INPUT_ERROR_TESTS` integrates it there for
+#: calibrated intervals), keep their fitted inputs as exact; their strain error would also need each run's own
+#: input (see **Inputs**), which the shared estimate does not cover.
+DISCOVERY_INPUT_ERRORS = frozenset({"stroke"})
 #: Bins per block of the block tests (residuals within a block are treated as dependent).
 BLOCK_BINS = 10
 #: Pressure resolution [Pa] that tells load-cycle conditions apart.
@@ -303,7 +310,9 @@ def discovery_data(
         session_start[run.key] = elapsed
         elapsed += float(run.time_s[-1] - run.time_s[0])
     noise = _sensor_noise(runs, specimen)
-    observations = prepare(one, bin_sizes, share_repeats=False, every_sample=every_sample)
+    observations = prepare(
+        one, bin_sizes, share_repeats=False, every_sample=every_sample, input_errors=DISCOVERY_INPUT_ERRORS
+    )
     of_group = [[conditions[key][0] for key in g.keys] for g in observations.groups]
     columns = [_condition_input_error(g, c) for g, c in zip(observations.groups, of_group, strict=True)]
     q = max((c.shape[0] for cs in columns for c in cs), default=0)

@@ -80,11 +80,22 @@ def base_posterior(specimens: int = 1) -> Posterior:
     in). With two or more it is hierarchical (see the module docstring)."""
     if specimens < 1:
         raise ValueError(f"specimens must be >= 1, got {specimens}")
-    prior = prior_for(SBC_MATERIAL)
-    fixed = {k: v for k, v in DEFAULT_CONFIG.nominal_parameters().items() if k not in SBC_FREE}
-    median = {**fixed, **{k: v for k, v in prior.median().items() if k in (*SBC_FREE, NOISE_NAME)}}
-    data = simulate(median, seed=0, specimen_values=None if specimens == 1 else [{}] * specimens)
-    return build_posterior(prepare(data), prior, config=DEFAULT_CONFIG, fixed=fixed)
+    return build_posterior(
+        prepare(simulate_median(specimens)), prior_for(SBC_MATERIAL), config=DEFAULT_CONFIG, fixed=_fixed()
+    )
+
+
+def _fixed() -> dict:
+    """The model parameters the study holds at their nominal values [SI]."""
+    return {k: v for k, v in DEFAULT_CONFIG.nominal_parameters().items() if k not in SBC_FREE}
+
+
+def simulate_median(specimens: int = 1):
+    """The protocol's rig data at the prior median (seed 0), alike for every specimen: what the base posterior
+    is built on before replicates swap their own data in."""
+    free = {k: v for k, v in prior_for(SBC_MATERIAL).median().items() if k in (*SBC_FREE, NOISE_NAME)}
+    median = {**_fixed(), **free}
+    return simulate(median, seed=0, specimen_values=None if specimens == 1 else [{}] * specimens)
 
 
 def rank_names(base: Posterior) -> tuple[str, ...]:
