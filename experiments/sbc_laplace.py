@@ -102,6 +102,8 @@ def main() -> None:
                 posterior = dataclasses.replace(base, observations=observations)
             posterior = posterior.with_batch_rows(8)
             exact = posterior_mode(posterior, start, np.diag(spread**2))
+            if input_errors:  # as peano-bayes fit does
+                posterior = posterior.with_input_error_at(exact.mode)
             laplace = refine_mode(posterior.batched, exact, coordinates=NonCentred.of(posterior))
             sd = np.sqrt(np.diag(laplace.covariance))
             row = {

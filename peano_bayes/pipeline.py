@@ -279,12 +279,13 @@ def infer(
     )
 
     fit_path, state_path = out / "fit.json", out / "sampler_state.npz"
+    linearised_path = out / "input_error_point.json"
     if resume and fit_path.exists():
         fitted = json.loads(fit_path.read_text())
         timings["least_squares_s"] = fitted["seconds"]
         log(f"{code}: least squares loaded from {fit_path}")
     else:
-        for stale in (fit_path, state_path):
+        for stale in (fit_path, state_path, linearised_path):
             stale.unlink(missing_ok=True)
         log(f"{code}: least squares from {n_starts} starts ...")
         fitted = least_squares(posterior, prior, n_starts=n_starts, seed=seed)
@@ -305,6 +306,15 @@ def infer(
             f"{code}: mode with exact inputs found in {laplace.steps} steps, {laplace.seconds:.1f} s, log posterior "
             f"{laplace.log_prob:.1f}" + (f" ({laplace.status})" if laplace.status else "")
         )
+    # The fitted inputs' error is linearised once, at the exact-input mode (Posterior.with_input_error_at); a
+    # resumed run reads that point back, so it samples the same posterior.
+    if laplace is not None:
+        write_text(linearised_path, json.dumps({"names": list(posterior.names), "theta": laplace.mode.tolist()}))
+        posterior = posterior.with_input_error_at(laplace.mode)
+    elif linearised_path.exists():
+        posterior = posterior.with_input_error_at(np.asarray(json.loads(linearised_path.read_text())["theta"]))
+    else:
+        log(f"{code}: no {linearised_path.name} beside the sampler state: inputs' error linearised at every point")
     t0 = time.perf_counter()
     posterior.batched(np.tile(centre, (rows, 1)))
     timings["compile_s"] = time.perf_counter() - t0

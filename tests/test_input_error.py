@@ -13,6 +13,7 @@ from peano_bayes.inference.likelihood import (
     _input_error_correction,
     group_log_likelihood,
     input_error_jacobian,
+    linearise_input_error,
     prepare,
     whitened_residuals,
 )
@@ -163,5 +164,30 @@ def test_load_cycles_carry_their_strain_and_pressure_error_and_integrate_it_exac
         rows = np.flatnonzero(shared == j)
         residual = (np.asarray(group.observed)[rows] - predicted[rows]).ravel()
         u = np.concatenate([np.asarray(jac)[j].T] * rows.size)
+        dense = stats.multivariate_normal(np.zeros(residual.size), np.diag(scale[rows].ravel() ** 2) + u @ u.T)
+        assert float(ll[rows].sum()) == pytest.approx(dense.logpdf(residual), rel=1e-9)
+
+
+def test_the_input_error_linearised_once_is_the_live_one_there_and_a_fixed_covariance_elsewhere(load_cycles):
+    """``linearise_input_error`` at the generating values: there the likelihood equals the one that
+    differentiates the simulation at every point; at other parameters it is the dense Gaussian of the
+    residuals there with the covariance D + (1 J0)(1 J0)^T of the linearisation point."""
+    obs, params = load_cycles
+    frozen = linearise_input_error(params, obs)
+    for live_group, frozen_group in zip(obs.groups, frozen.groups, strict=True):
+        live = np.asarray(group_log_likelihood(params, live_group, geometry=obs.geometry)[2]).sum()
+        fixed = np.asarray(group_log_likelihood(params, frozen_group, geometry=obs.geometry)[2]).sum()
+        assert fixed == pytest.approx(live, rel=1e-12)
+    moved = {**params, "tensile_ka_n_per_m": params["tensile_ka_n_per_m"] * 1.03}
+    group = frozen.groups[0]
+    jac = np.asarray(group.input_jacobian)
+    predicted, scale, ll = (np.asarray(a) for a in group_log_likelihood(moved, group, geometry=obs.geometry))
+    live_ll = np.asarray(group_log_likelihood(moved, obs.groups[0], geometry=obs.geometry)[2])
+    assert abs(float(ll.sum()) - float(live_ll.sum())) > 1e-9  # a different covariance there
+    shared = np.asarray(group.shared)
+    for j in range(group.specimen_index.shape[0]):
+        rows = np.flatnonzero(shared == j)
+        residual = (np.asarray(group.observed)[rows] - predicted[rows]).ravel()
+        u = np.concatenate([jac[j].T] * rows.size)
         dense = stats.multivariate_normal(np.zeros(residual.size), np.diag(scale[rows].ravel() ** 2) + u @ u.T)
         assert float(ll[rows].sum()) == pytest.approx(dense.logpdf(residual), rel=1e-9)

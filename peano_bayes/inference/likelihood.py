@@ -41,7 +41,7 @@ identity, a q x q solve per simulated input, q = 2 per ramp).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 
 import equinox as eqx
@@ -170,6 +170,7 @@ class RunGroup:
     strain_error: np.ndarray | None = None
     pressure_error: np.ndarray | None = None
     added_compliance_m_per_n: np.ndarray | None = None
+    input_jacobian: np.ndarray | None = None
 
     @property
     def has_input_error(self) -> bool:
@@ -219,6 +220,7 @@ jax.tree_util.register_dataclass(
         "pressure_error",
         "bin_nodes",
         "added_compliance_m_per_n",
+        "input_jacobian",
     ],
     meta_fields=["test", "keys"],
 )
@@ -729,6 +731,20 @@ def input_error_jacobian(
     return predicted, error, jac
 
 
+def linearise_input_error(params, observations: Observations, *, config: ModelConfig = DEFAULT_CONFIG) -> Observations:
+    """``observations`` whose groups carry the fitted inputs' error Jacobian ``J`` (u, q, m) at ``params``
+    (:attr:`RunGroup.input_jacobian`), so the likelihood uses that ``J`` instead of differentiating the
+    simulation at every evaluation (which costs one forward-mode derivative per error column)."""
+    model = _model_parameters(params)
+    groups = []
+    for group in observations.groups:
+        if group.has_input_error:
+            _, _, jac = input_error_jacobian(model, group, config=config, geometry=observations.geometry)
+            group = replace(group, input_jacobian=np.asarray(jac))
+        groups.append(group)
+    return replace(observations, groups=tuple(groups))
+
+
 def _input_error_correction(residual, weight, jac, shared, n_sets: int):
     """Per simulated row (u,): the change of the log-likelihood of its runs' residuals when the fitted inputs'
     error ``J a``, ``a ~ N(0, I_q)``, is integrated out, ``b^T A^-1 b / 2 - ln det A / 2`` with
@@ -791,7 +807,10 @@ def group_log_likelihood(
     observed = jnp.asarray(group.observed)
     measured = jnp.isfinite(observed)
     with_input_error = group.has_input_error and family == "gaussian"
-    if with_input_error:
+    if with_input_error and group.input_jacobian is not None:  # linearised once (linearise_input_error)
+        predicted, solver_error = predict(model, group, config=config, geometry=geometry)
+        jac, shared = jnp.asarray(group.input_jacobian), jnp.asarray(group.shared)
+    elif with_input_error:
         sets, solver_error, jac = input_error_jacobian(model, group, config=config, geometry=geometry)
         shared = jnp.asarray(group.shared)
         predicted, solver_error = sets[shared], solver_error[shared]
@@ -867,6 +886,7 @@ __all__ = [
     "DEFAULT_BINS_PER_SEGMENT",
     "DRIVING_INPUTS",
     "INPUT_ERROR_TESTS",
+    "linearise_input_error",
     "NOISE_PARAMETERS",
     "SPECIMEN_OFFSET",
     "SPECIMEN_SCALED",

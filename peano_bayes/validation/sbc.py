@@ -246,6 +246,7 @@ def run_replicate(
         spread = np.concatenate([spread, np.full(base.n_contrasts, contrast_sd)])
     posterior = posterior.with_batch_rows(n_walkers // 2)  # the sampler's batch size: one compilation
     exact = posterior_mode(posterior, start, np.diag(spread**2))
+    posterior = posterior.with_input_error_at(exact.mode)  # as peano-bayes fit does
     laplace = refine_mode(posterior.batched, exact, coordinates=NonCentred.of(posterior))
     result = sample(
         posterior,
