@@ -105,7 +105,8 @@ DRIVING_INPUTS = MappingProxyType(
 #: Laplace 90 % interval of ``tensile_ka`` covers 0.80 of the truths with the load cycles' inputs taken as exact,
 #: 0.87 with their error integrated and 0.90 with noiseless inputs (its specimen contrast 0.75, 0.87, 0.88). Each
 #: column of the error costs a forward-mode derivative: on TP's default tests a log-posterior evaluation costs
-#: 1.8 times the inputs-exact one (``experiments/bench_input_error.py``; the stroke's error alone cost 1.2).
+#: 1.8-2.0 times the inputs-exact one (``experiments/bench_input_error.py``), so ``fit`` computes the Jacobian once,
+#: at the exact-input mode (:func:`linearise_input_error`), and then costs about what the inputs-exact one does.
 INPUT_ERROR_TESTS = frozenset({"load_cycle", "blocking", "stroke"})
 #: Driving inputs whose fit error can be modelled (the step's supply pressure is not).
 ERROR_INPUTS = ("strain", "pressure_pa")
