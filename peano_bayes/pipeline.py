@@ -172,6 +172,23 @@ def walker_start(posterior, fitted: dict) -> tuple[np.ndarray, np.ndarray]:
     return centre, cov
 
 
+def _linearisation_point(path: Path, state_path: Path, posterior) -> np.ndarray:
+    """The point a resumed run linearised its inputs' error at (``input_error_point.json``); a sampler state without
+    it, or with other parameters, was written by another likelihood and cannot be continued."""
+    if not path.exists():
+        raise PeanoBayesInputError(
+            f"{state_path}: no {path.name} beside it: the state was written by an earlier version of peano-bayes, "
+            "whose likelihood differs; run again without --resume"
+        )
+    stored = json.loads(path.read_text())
+    if stored.get("names") != list(posterior.names):
+        raise PeanoBayesInputError(
+            f"{path}: linearised over the parameters {', '.join(stored.get('names') or [])}; this fit samples "
+            f"{', '.join(posterior.names)}. Run again without --resume"
+        )
+    return np.asarray(stored["theta"], dtype=float)
+
+
 def _model_choice(dataset: Dataset, config, out: Path, *, discover: bool, resume: bool, seed: int, log, centre=None):
     """The model a fit samples: ``config``, or with ``discover`` ``config`` plus what discovery names on the
     data (its report in ``out/discovery``; its base fit also starts around ``centre``, name -> value [SI], the
@@ -311,10 +328,8 @@ def infer(
     if laplace is not None:
         write_text(linearised_path, json.dumps({"names": list(posterior.names), "theta": laplace.mode.tolist()}))
         posterior = posterior.with_input_error_at(laplace.mode)
-    elif linearised_path.exists():
-        posterior = posterior.with_input_error_at(np.asarray(json.loads(linearised_path.read_text())["theta"]))
     else:
-        log(f"{code}: no {linearised_path.name} beside the sampler state: inputs' error linearised at every point")
+        posterior = posterior.with_input_error_at(_linearisation_point(linearised_path, state_path, posterior))
     t0 = time.perf_counter()
     posterior.batched(np.tile(centre, (rows, 1)))
     timings["compile_s"] = time.perf_counter() - t0

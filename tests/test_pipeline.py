@@ -1,9 +1,15 @@
 """The main job's plumbing: the run log and the results page's parameter table (population, new specimen,
 posterior contraction)."""
 
+import json
 import pickle
+from types import SimpleNamespace
 
-from peano_bayes.pipeline import RunLog, index_markdown
+import numpy as np
+import pytest
+
+from peano_bayes.errors import PeanoBayesInputError
+from peano_bayes.pipeline import RunLog, _linearisation_point, index_markdown
 
 
 def test_run_log_prints_and_appends_timestamped_lines_and_pickles(tmp_path):
@@ -86,3 +92,17 @@ def test_the_results_page_names_a_bundled_dataset_by_its_place_in_the_package():
     assert "Data: `/data/rig/my.csv`" in own
     clone = index_markdown([{**_summary(0.9), "dataset": "/tmp/job/clone/peano_bayes/bundled/data/FC.csv"}])
     assert "Data: `peano_bayes/bundled/data/FC.csv`" in clone  # the job ran from another copy of the package
+
+
+def test_a_resumed_state_needs_the_point_its_input_error_was_linearised_at(tmp_path):
+    """A resume reads the linearisation point back; a state without it (an earlier version's likelihood) or with
+    other parameters is refused with a message naming the file and what to do."""
+    posterior = SimpleNamespace(names=("a", "b"))
+    path, state = tmp_path / "input_error_point.json", tmp_path / "sampler_state.npz"
+    with pytest.raises(PeanoBayesInputError, match="earlier version.*without --resume"):
+        _linearisation_point(path, state, posterior)
+    path.write_text(json.dumps({"names": ["a", "c"], "theta": [1.0, 2.0]}))
+    with pytest.raises(PeanoBayesInputError, match="linearised over the parameters a, c; this fit samples a, b"):
+        _linearisation_point(path, state, posterior)
+    path.write_text(json.dumps({"names": ["a", "b"], "theta": [1.0, 0.1 + 0.2]}))
+    np.testing.assert_array_equal(_linearisation_point(path, state, posterior), [1.0, 0.1 + 0.2])

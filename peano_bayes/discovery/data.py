@@ -203,6 +203,7 @@ def _take(group: RunGroup, rows: np.ndarray, cycle: np.ndarray) -> RunGroup:
         bin_nodes=pick(group.bin_nodes),
         strain_error=pick(group.strain_error),
         pressure_error=pick(group.pressure_error),
+        input_jacobian=pick(group.input_jacobian),
     )
 
 

@@ -36,7 +36,9 @@ fit's segments, that error is ``B a`` with ``a ~ N(0, I)`` (:func:`~peano_bayes.
 for repeats averaged, the exact low-rank factor of their mean's covariance). Linearised through the simulation
 (``J = d prediction / d a``, one forward-mode derivative per column), it adds ``J J^T`` to the covariance of the
 bins of every run sharing the simulation; :func:`group_log_likelihood` integrates ``a`` out exactly (Woodbury
-identity, a q x q solve per simulated input, q = 2 per ramp).
+identity, a q x q solve per simulated input; q = 2 per ramp and 1 per hold of each fitted input, a load cycle's
+strain and pressure each with their own columns). Its Jacobian can be computed once, at a point, and held
+(:func:`linearise_input_error`; ``fit`` does so at the exact-input mode).
 """
 
 from __future__ import annotations
@@ -152,7 +154,8 @@ class RunGroup:
     the simulation's times (``a ~ N(0, I_q)``, zero columns pad sets with fewer; see the module docstring);
     ``bin_nodes`` (u, p m) int: where each bin's ``p`` points sit among a row's ``L >= p m`` simulated points
     (the others are samples where the input path turns, :func:`with_path_samples`), so the simulated arrays
-    are (u, L).
+    are (u, L); ``input_jacobian`` (u, q, m) or ``None``: the predictions' derivative along the error columns,
+    held fixed when set (:func:`linearise_input_error`), else computed at every evaluation.
     """
 
     test: str
@@ -735,13 +738,15 @@ def input_error_jacobian(
 def linearise_input_error(params, observations: Observations, *, config: ModelConfig = DEFAULT_CONFIG) -> Observations:
     """``observations`` whose groups carry the fitted inputs' error Jacobian ``J`` (u, q, m) at ``params``
     (:attr:`RunGroup.input_jacobian`), so the likelihood uses that ``J`` instead of differentiating the
-    simulation at every evaluation (which costs one forward-mode derivative per error column)."""
+    simulation at every evaluation (which costs one forward-mode derivative per error column). A group whose
+    Jacobian is not finite at ``params`` (a simulation that fails there) keeps computing it at every evaluation."""
     model = _model_parameters(params)
     groups = []
     for group in observations.groups:
         if group.has_input_error:
             _, _, jac = input_error_jacobian(model, group, config=config, geometry=observations.geometry)
-            group = replace(group, input_jacobian=np.asarray(jac))
+            if np.all(np.isfinite(jac)):
+                group = replace(group, input_jacobian=np.asarray(jac))
         groups.append(group)
     return replace(observations, groups=tuple(groups))
 
