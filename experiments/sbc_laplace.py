@@ -34,7 +34,6 @@ import numpy as np
 
 from peano_bayes.inference.laplace import NonCentred, posterior_mode, refine_mode
 from peano_bayes.inference.likelihood import INPUT_ERROR_TESTS, prepare
-from peano_bayes.inference.posterior import SPECIMEN_SD
 from peano_bayes.validation import sbc
 
 VARIANTS = {
@@ -42,18 +41,6 @@ VARIANTS = {
     "input-error": (INPUT_ERROR_TESTS, False),
     "noiseless-inputs": (frozenset(), True),
 }
-
-
-def start_and_spread(base):
-    """The SBC's start (prior median, contrasts 0) and its diagonal spread, as ``run_replicate`` builds them."""
-    prior = base.prior
-    draws = prior.sample(np.random.default_rng(0), 2000)
-    spread = np.std(draws, axis=0)
-    tau = np.asarray(prior.from_unconstrained(draws)[SPECIMEN_SD])
-    contrast_sd = np.std(tau * np.random.default_rng(1).standard_normal(tau.shape))
-    spread = np.concatenate([spread, np.full(base.n_contrasts, contrast_sd)])
-    start = np.concatenate([np.asarray(prior.median_unconstrained()), np.zeros(base.n_contrasts)])
-    return start, spread
 
 
 def summary(rows: list[dict]) -> dict:
@@ -80,11 +67,8 @@ def main() -> None:
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args()
     input_errors, noiseless = VARIANTS[args.variant]
-    base = sbc.base_posterior(args.specimens)
-    base = dataclasses.replace(
-        base, observations=prepare(sbc.simulate_median(args.specimens), input_errors=input_errors)
-    )
-    start, spread = start_and_spread(base)
+    base = sbc.base_posterior(args.specimens, input_errors=input_errors)
+    start, spread = sbc.mode_start(base)
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / f"{args.variant}.jsonl"
     rows = [json.loads(line) for line in path.read_text().splitlines()] if path.exists() else []
@@ -102,8 +86,7 @@ def main() -> None:
                 posterior = dataclasses.replace(base, observations=observations)
             posterior = posterior.with_batch_rows(8)
             exact = posterior_mode(posterior, start, np.diag(spread**2))
-            if input_errors:  # as peano-bayes fit does
-                posterior = posterior.with_input_error_at(exact.mode)
+            posterior = posterior.with_input_error_at(exact.mode)  # as peano-bayes fit does (none to hold: no-op)
             laplace = refine_mode(posterior.batched, exact, coordinates=NonCentred.of(posterior))
             sd = np.sqrt(np.diag(laplace.covariance))
             row = {

@@ -733,12 +733,16 @@ def input_error_jacobian(
         (predicted, error), (tangent, _) = jax.jvp(fn, (strain, pressure), (ds, dp))
         return predicted, error, tangent
 
-    d_strain = jnp.asarray(group.strain_error) if group.strain_error is not None else None
-    d_pressure = jnp.asarray(group.pressure_error)
-    if d_strain is None:
-        d_strain = jnp.zeros_like(d_pressure)
+    d_strain, d_pressure = _error_columns(group)
     predicted, error, jac = jax.vmap(along, in_axes=(1, 1), out_axes=(None, None, 1))(d_strain, d_pressure)
     return predicted, error, jac
+
+
+def _error_columns(group: RunGroup):
+    """``(strain, pressure)`` (u, q, L) error columns of ``group``'s fitted inputs (strain zeros where the test
+    has no strain error); JAX arrays, traced or not."""
+    d_pressure = jnp.asarray(group.pressure_error)
+    return (jnp.zeros_like(d_pressure) if group.strain_error is None else jnp.asarray(group.strain_error)), d_pressure
 
 
 #: Step [sd of the fitted inputs' error] of the central differences that :func:`linearise_input_error` takes along
@@ -755,21 +759,18 @@ def linearise_input_error(params, observations: Observations, *, config: ModelCo
     whole linearisation saves on a short fit. A group whose ``J`` is not finite at ``params`` (a simulation
     that fails there) keeps computing it at every evaluation."""
     model = _model_parameters(params)
-    sets = _sets_function(observations.geometry)
-    h = LINEARISATION_STEP
+    sets, geometry, h = _sets_function(observations.geometry), observations.geometry, LINEARISATION_STEP
     groups = []
     for group in observations.groups:
         if group.has_input_error:
+            plain = _without_jacobian(group)
             strain, pressure = np.asarray(group.strain), np.asarray(group.pressure_pa)
-            d_pressure = np.asarray(group.pressure_error)
-            d_strain = np.zeros_like(d_pressure) if group.strain_error is None else np.asarray(group.strain_error)
-
-            def along(sign, k, group=group, strain=strain, pressure=pressure, ds=d_strain, dp=d_pressure):
-                moved_s, moved_p = strain + sign * h * ds[:, k], pressure + sign * h * dp[:, k]
-                plain = _without_jacobian(group)
-                return np.asarray(sets(model, plain, moved_s, moved_p, config, observations.geometry)[0])
-
-            jac = np.stack([(along(1.0, k) - along(-1.0, k)) / (2.0 * h) for k in range(d_pressure.shape[1])], 1)
+            columns = []
+            for ds, dp in zip(*(np.swapaxes(np.asarray(d), 0, 1) for d in _error_columns(group)), strict=True):
+                up = sets(model, plain, strain + h * ds, pressure + h * dp, config, geometry)[0]
+                down = sets(model, plain, strain - h * ds, pressure - h * dp, config, geometry)[0]
+                columns.append((np.asarray(up) - np.asarray(down)) / (2.0 * h))
+            jac = np.stack(columns, axis=1)
             if np.all(np.isfinite(jac)):
                 group = replace(group, input_jacobian=jac)
         groups.append(group)

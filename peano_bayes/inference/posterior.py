@@ -283,12 +283,12 @@ class Posterior:
     def with_input_error_at(self, theta) -> Posterior:
         """This posterior with the fitted inputs' error linearised once, at ``theta`` (D,), instead of at every
         evaluation (:func:`~peano_bayes.inference.likelihood.linearise_input_error`): the Jacobian of the
-        predictions along the error's columns changes little over the posterior, and computing it costs one
-        forward-mode derivative of the simulation per column. On the bundled TP data around the exact-input mode,
-        over 38 draws of the Laplace approximation the log posterior differs from the one with the Jacobian at
-        each point by 0.009 in sd (its own spread there: 5.5), and an evaluation costs 0.56-0.63 times as much
-        (``experiments/input_error_linearisation.py``). The compiled functions are shared (they are traced again
-        for the new group structure once)."""
+        predictions along the error's columns changes little over the posterior, and computing it at every
+        evaluation costs one forward-mode derivative of the simulation per column. On the bundled TP data around the
+        exact-input mode, over 38 draws of the Laplace approximation the log posterior differs from the one with the
+        Jacobian at each point by 0.009 in sd (its own spread there: 5.5), and an evaluation costs 0.56-0.63 times
+        as much (``experiments/input_error_linearisation.py``). The compiled functions are shared (they are traced
+        again for the new group structure once)."""
         observations = linearise_input_error(self.params(jnp.asarray(theta)), self.observations, config=self.config)
         other = dataclasses.replace(self, observations=observations)
         object.__setattr__(other, "_compiled", self._compiled)

@@ -33,7 +33,7 @@ from scipy import stats
 
 from ..errors import PeanoBayesInputError
 from ..inference.laplace import NonCentred, posterior_mode, refine_mode
-from ..inference.likelihood import prepare
+from ..inference.likelihood import INPUT_ERROR_TESTS, prepare
 from ..inference.posterior import SPECIMEN_SD, Posterior, build_posterior, helmert
 from ..inference.priors import prior_for
 from ..inference.sample import sample
@@ -75,14 +75,13 @@ def simulate(params: dict, seed: int, exact_inputs: bool = False, specimen_value
     )
 
 
-def base_posterior(specimens: int = 1) -> Posterior:
+def base_posterior(specimens: int = 1, input_errors=INPUT_ERROR_TESTS) -> Posterior:
     """The SBC posterior of ``specimens`` specimens (on data at the prior median; replicates swap the data
     in). With two or more it is hierarchical (see the module docstring)."""
     if specimens < 1:
         raise ValueError(f"specimens must be >= 1, got {specimens}")
-    return build_posterior(
-        prepare(simulate_median(specimens)), prior_for(SBC_MATERIAL), config=DEFAULT_CONFIG, fixed=_fixed()
-    )
+    data = prepare(simulate_median(specimens), input_errors=input_errors)
+    return build_posterior(data, prior_for(SBC_MATERIAL), config=DEFAULT_CONFIG, fixed=_fixed())
 
 
 def _fixed() -> dict:
@@ -216,6 +215,20 @@ class Replicate:
         return dict(self.__dict__)
 
 
+def mode_start(base: Posterior) -> tuple[np.ndarray, np.ndarray]:
+    """Where every replicate's mode search starts: ``(start, spread)`` (D,), the prior median with the contrasts
+    at 0, and the sd of each entry's prior (a contrast's: that of tau N(0, 1), about 0.2)."""
+    prior = base.prior
+    prior_draws = prior.sample(np.random.default_rng(0), 2000)
+    start = np.concatenate([np.asarray(prior.median_unconstrained()), np.zeros(base.n_contrasts)])
+    spread = np.std(prior_draws, axis=0)
+    if base.n_contrasts:
+        tau = np.asarray(prior.from_unconstrained(prior_draws)[SPECIMEN_SD])
+        contrast_sd = np.std(tau * np.random.default_rng(1).standard_normal(tau.shape))
+        spread = np.concatenate([spread, np.full(base.n_contrasts, contrast_sd)])
+    return start, spread
+
+
 def run_replicate(
     base: Posterior,
     index: int,
@@ -231,19 +244,12 @@ def run_replicate(
     inference from the prior median (never the truth), ranks and coverage of every quantity of
     :func:`rank_names`."""
     t0 = time.perf_counter()
-    prior = base.prior
     truth, data, redraws, rng = replicate_data(base, index, seed=seed, exact_inputs=exact_inputs)
     try:  # same protocol: reuse the compiled log posterior
         posterior = base.with_observations(prepare(data))
     except ValueError:  # the replicate's inputs were cut into other segments (other bin shapes): its own
         posterior = replace(base, observations=prepare(data))
-    prior_draws = prior.sample(np.random.default_rng(0), 2000)
-    start = np.concatenate([np.asarray(prior.median_unconstrained()), np.zeros(base.n_contrasts)])
-    spread = np.std(prior_draws, axis=0)
-    if base.n_contrasts:  # each contrast starts at 0 with the sd of its prior, tau N(0, 1) (about 0.2)
-        tau = np.asarray(prior.from_unconstrained(prior_draws)[SPECIMEN_SD])
-        contrast_sd = np.std(tau * np.random.default_rng(1).standard_normal(tau.shape))
-        spread = np.concatenate([spread, np.full(base.n_contrasts, contrast_sd)])
+    start, spread = mode_start(base)
     posterior = posterior.with_batch_rows(n_walkers // 2)  # the sampler's batch size: one compilation
     exact = posterior_mode(posterior, start, np.diag(spread**2))
     posterior = posterior.with_input_error_at(exact.mode)  # as peano-bayes fit does
