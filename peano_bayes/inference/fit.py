@@ -19,7 +19,7 @@ import optimistix as optx
 
 from ..defaults import DEFAULT_STARTS
 from ..physics import ModelConfig
-from .likelihood import OBSERVED, SOLVER_TOLERANCE, Observations, bin_noise_sd, predict
+from .likelihood import OBSERVED, SOLVER_TOLERANCE, Observations, bin_noise_sd, predict, whitened_residuals
 from .priors import Prior
 
 #: Noise scales [per raw sample] used to weight the residuals when none are given.
@@ -129,7 +129,7 @@ def residual_function(observations: Observations, prior: Prior, config: ModelCon
     return lambda u, args: evaluate(u, observations.groups)[0]
 
 
-def _predicted(params, observations: Observations, config: ModelConfig) -> list[np.ndarray]:
+def predictions(params, observations: Observations, config: ModelConfig) -> list[np.ndarray]:
     """Each group's predicted signal at ``params``, from one compiled program over all groups (the groups are
     its argument, so another material's data of the same shapes reuses it through the persistent cache);
     evaluated op by op, each simulation's scan and root solve would compile on its own."""
@@ -143,7 +143,7 @@ def fit_quality(params, observations: Observations, config: ModelConfig, predict
     """Per test: RMSE, max |error| (in the observed signal's unit) and R^2 over the binned data. ``predicted``:
     each group's prediction at ``params``, if already computed."""
     quality = {}
-    predicted = _predicted(params, observations, config) if predicted is None else predicted
+    predicted = predictions(params, observations, config) if predicted is None else predicted
     for group, prediction in zip(observations.groups, predicted, strict=True):
         observed = np.asarray(group.observed)
         error = (observed - prediction)[np.isfinite(observed)]
@@ -161,6 +161,48 @@ def fit_quality(params, observations: Observations, config: ModelConfig, predict
             "max_error": float(np.max(np.abs(error))),
             "r2": float(1.0 - np.sum(error**2) / np.sum((values - values.mean()) ** 2)),
             "bins": int(error.size),
+        }
+    return out
+
+
+#: Lag-1 correlation of the whitened residuals above which a test's misfit counts as structured: the mean of
+#: AR(1) residuals of that correlation is sqrt((1 + 0.2) / (1 - 0.2)) = 1.22 times as uncertain as independent
+#: noise of the same size would make it.
+CORRELATION_LIMIT = 0.2
+
+
+def residual_correlation(params, observations: Observations, config: ModelConfig, predicted=None) -> dict:
+    """Per test: is what the model leaves over noise? The pooled lag-1 correlation ``rho`` of the whitened
+    residuals (:func:`~peano_bayes.inference.likelihood.whitened_residuals`, sequential within each run, each
+    run's fitted inputs' error integrated as the likelihood does) over the neighbouring bins of every run that
+    are both measured: sum z_i z_(i-1) / sqrt(sum z_i^2 sum z_(i-1)^2), each sum over those pairs. The residuals are
+    independent standard normals when the model is right, so ``rho`` is within a few 1/sqrt(pairs) of 0; a
+    smooth misfit the likelihood spreads over its noise scale gives ``rho`` near 1.
+    ``interval_factor`` = sqrt((1 + rho) / (1 - rho)) (1 where rho <= 0): a rough indication of how much too
+    narrow the intervals this test informs are (exact for the mean of AR(1) residuals with that correlation).
+    ``consistent_with_noise``: rho at most :data:`CORRELATION_LIMIT` or within 4 / sqrt(pairs) of 0. A test
+    with no two consecutive measured bins has ``lag1`` None and passes. ``params`` must hold the noise scales;
+    ``predicted``: each group's prediction at ``params``, if already computed."""
+    predicted = [None] * len(observations.groups) if predicted is None else predicted
+    sums: dict[str, np.ndarray] = {}
+    for group, prediction in zip(observations.groups, predicted, strict=True):
+        z = whitened_residuals(params, group, config=config, geometry=observations.geometry, predicted=prediction)
+        entry = sums.setdefault(group.test, np.zeros(4))
+        both = np.isfinite(z[:, 1:]) & np.isfinite(z[:, :-1])  # neighbouring bins, both measured
+        later, earlier = np.where(both, z[:, 1:], 0.0), np.where(both, z[:, :-1], 0.0)
+        entry += [np.sum(later * earlier), np.sum(later**2), np.sum(earlier**2), np.sum(both)]
+    out = {}
+    for test, (cross, later, earlier, pairs) in sums.items():
+        if pairs == 0 or later * earlier == 0:  # no two consecutive measured bins: nothing to judge
+            out[test] = {"lag1": None, "pairs": int(pairs), "interval_factor": 1.0, "consistent_with_noise": True}
+            continue
+        rho = float(cross / np.sqrt(later * earlier))  # in [-1, 1] (Cauchy-Schwarz)
+        positive = min(max(rho, 0.0), 1.0 - 1e-12)
+        out[test] = {
+            "lag1": rho,
+            "pairs": int(pairs),
+            "interval_factor": float(np.sqrt((1.0 + positive) / (1.0 - positive))),
+            "consistent_with_noise": bool(rho <= max(CORRELATION_LIMIT, 4.0 / np.sqrt(pairs))),
         }
     return out
 
@@ -270,4 +312,14 @@ def fit(
     )
 
 
-__all__ = ["DEFAULT_NOISE", "FitResult", "dense_jacobian", "fit", "fit_quality", "residual_function"]
+__all__ = [
+    "CORRELATION_LIMIT",
+    "DEFAULT_NOISE",
+    "FitResult",
+    "dense_jacobian",
+    "fit",
+    "fit_quality",
+    "predictions",
+    "residual_correlation",
+    "residual_function",
+]

@@ -862,24 +862,42 @@ def group_log_likelihood(
 
 
 def whitened_residuals(
-    params, group: RunGroup, *, config: ModelConfig = DEFAULT_CONFIG, geometry: Geometry = PAPER_GEOMETRY
+    params,
+    group: RunGroup,
+    *,
+    config: ModelConfig = DEFAULT_CONFIG,
+    geometry: Geometry = PAPER_GEOMETRY,
+    predicted=None,
 ) -> np.ndarray:
     """(r, m) residuals of ``group`` at ``params`` in units of their noise, NaN where unmeasured: (observed -
     predicted) / bin sd, or, where the fitted inputs' error enters the likelihood, the residuals of the runs
     sharing an input whitened by the Cholesky factor of their joint covariance (in run, bin order). Either way
-    they are independent standard normals when the model is right, so their rms is the fit in noise units."""
+    they are independent standard normals when the model is right, so their rms is the fit in noise units;
+    being sequential (each bin's innovation given the bins before it), their correlation from bin to bin shows
+    misfit with structure (:func:`~peano_bayes.inference.fit.residual_correlation`). The error's Jacobian is
+    the group's held one where set (:func:`linearise_input_error`, as the likelihood uses it), else computed at
+    ``params``; ``predicted`` (r, m), the group's prediction at ``params``, saves a simulation where given and
+    the Jacobian is held."""
     model = _model_parameters(params)
     scale = np.asarray(bin_noise_sd(params[OBSERVED[group.test][1]], group))
+    if group.has_input_error and group.input_jacobian is None:
+        sets, _, jac = input_error_jacobian(model, group, config=config, geometry=geometry)
+        predicted = np.asarray(sets)[group.shared]
+    else:
+        jac = group.input_jacobian
+        if predicted is None:
+            predicted = predict(model, group, config=config, geometry=geometry)[0]
+    residual = np.asarray(group.observed) - np.asarray(predicted)
     if not group.has_input_error:
-        predicted, _ = predict(model, group, config=config, geometry=geometry)
-        return (np.asarray(group.observed) - np.asarray(predicted)) / scale
-    sets, _, jac = input_error_jacobian(model, group, config=config, geometry=geometry)
-    residual = np.asarray(group.observed) - np.asarray(sets)[group.shared]
+        return residual / scale
+    jac = np.asarray(jac)
     out = np.full(residual.shape, np.nan)
-    for j in range(np.asarray(sets).shape[0]):
+    for j in range(jac.shape[0]):
         rows = np.flatnonzero(group.shared == j)
+        if rows.size == 0:
+            continue
         measured = np.isfinite(residual[rows]).ravel()
-        u = np.concatenate([np.asarray(jac[j]).T] * rows.size)[measured]
+        u = np.concatenate([jac[j].T] * rows.size)[measured]
         cov = np.diag((scale[rows] ** 2).ravel()[measured]) + u @ u.T
         z = np.full(measured.size, np.nan)
         z[measured] = np.linalg.solve(np.linalg.cholesky(cov), residual[rows].ravel()[measured])
