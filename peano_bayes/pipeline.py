@@ -387,6 +387,7 @@ def infer(
                 f"{code}: WARNING: the {test} residuals at the posterior mean are correlated from bin to bin "
                 f"(lag-1 {c['lag1']:.2f}): the model misses structure in these data, and the intervals it informs "
                 f"are too narrow (roughly {c['interval_factor']:.1f}x, as for AR(1) residuals)"
+                + ("" if conv.converged else "; the run has not converged, so its mean may not be a fit yet")
             )
     summary = {
         "material": code,
