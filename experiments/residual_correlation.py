@@ -21,7 +21,7 @@ import numpy as np
 import peano_bayes.pipeline as pipeline
 from peano_bayes import bundled, enable_compilation_cache
 from peano_bayes.data import load
-from peano_bayes.inference.fit import residual_correlation
+from peano_bayes.inference.fit import lag1_sums, residual_correlation
 from peano_bayes.inference.likelihood import whitened_residuals
 from peano_bayes.rig import simulate_veale_dataset
 
@@ -51,11 +51,9 @@ def per_run(posterior, params) -> dict:
     rows: dict[str, list] = {}
     for group in posterior.observations.groups:
         z = whitened_residuals(params, group, config=posterior.config, geometry=posterior.observations.geometry)
-        both = np.isfinite(z[:, 1:]) & np.isfinite(z[:, :-1])  # as fit.residual_correlation pairs them
-        for row, pair in zip(z, both, strict=True):
-            a, b = row[1:][pair], row[:-1][pair]
+        for (cross, later, earlier, _), row in zip(lag1_sums(z), z, strict=True):
             rows.setdefault(group.test, []).append(
-                (float(np.sum(a * b) / np.sqrt(np.sum(a**2) * np.sum(b**2))), float(np.sqrt(np.nanmean(row**2))))
+                (float(cross / np.sqrt(later * earlier)), float(np.sqrt(np.nanmean(row**2))))
             )
     out = {}
     for test, values in rows.items():

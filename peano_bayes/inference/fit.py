@@ -171,6 +171,16 @@ def fit_quality(params, observations: Observations, config: ModelConfig, predict
 CORRELATION_LIMIT = 0.2
 
 
+def lag1_sums(z: np.ndarray) -> np.ndarray:
+    """(r, 4) per row of ``z`` (r, m) (NaN where unmeasured), over its neighbouring bins that are both measured:
+    sum z_i z_(i-1), sum z_i^2, sum z_(i-1)^2 and the number of such pairs; their lag-1 correlation is
+    ``cross / sqrt(later earlier)``, pooled over rows by summing first (:func:`residual_correlation`)."""
+    z = np.asarray(z, float)
+    both = np.isfinite(z[:, 1:]) & np.isfinite(z[:, :-1])
+    later, earlier = np.where(both, z[:, 1:], 0.0), np.where(both, z[:, :-1], 0.0)
+    return np.stack([np.sum(later * earlier, 1), np.sum(later**2, 1), np.sum(earlier**2, 1), np.sum(both, 1)], 1)
+
+
 def residual_correlation(params, observations: Observations, config: ModelConfig, predicted=None) -> dict:
     """Per test: is what the model leaves over noise? The pooled lag-1 correlation ``rho`` of the whitened
     residuals (:func:`~peano_bayes.inference.likelihood.whitened_residuals`, sequential within each run, each
@@ -187,10 +197,7 @@ def residual_correlation(params, observations: Observations, config: ModelConfig
     sums: dict[str, np.ndarray] = {}
     for group, prediction in zip(observations.groups, predicted, strict=True):
         z = whitened_residuals(params, group, config=config, geometry=observations.geometry, predicted=prediction)
-        entry = sums.setdefault(group.test, np.zeros(4))
-        both = np.isfinite(z[:, 1:]) & np.isfinite(z[:, :-1])  # neighbouring bins, both measured
-        later, earlier = np.where(both, z[:, 1:], 0.0), np.where(both, z[:, :-1], 0.0)
-        entry += [np.sum(later * earlier), np.sum(later**2), np.sum(earlier**2), np.sum(both)]
+        sums[group.test] = sums.get(group.test, 0.0) + lag1_sums(z).sum(axis=0)
     out = {}
     for test, (cross, later, earlier, pairs) in sums.items():
         if pairs == 0 or later * earlier == 0:  # no two consecutive measured bins: nothing to judge
@@ -319,6 +326,7 @@ __all__ = [
     "dense_jacobian",
     "fit",
     "fit_quality",
+    "lag1_sums",
     "predictions",
     "residual_correlation",
     "residual_function",

@@ -894,8 +894,6 @@ def whitened_residuals(
     out = np.full(residual.shape, np.nan)
     for j in range(jac.shape[0]):
         rows = np.flatnonzero(group.shared == j)
-        if rows.size == 0:
-            continue
         measured = np.isfinite(residual[rows]).ravel()
         u = np.concatenate([jac[j].T] * rows.size)[measured]
         cov = np.diag((scale[rows] ** 2).ravel()[measured]) + u @ u.T
