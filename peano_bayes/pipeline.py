@@ -33,9 +33,9 @@ from .defaults import (
 from .errors import PeanoBayesInputError
 from .formatting import format_number
 from .inference.coordinates import sampler_coordinates
-from .inference.fit import fit, fit_quality, predictions, residual_correlation
+from .inference.fit import fit, fit_quality, predictions, residual_correlation, structured_lag1
 from .inference.laplace import NonCentred, posterior_mode, refine_mode
-from .inference.likelihood import prepare
+from .inference.likelihood import MAX_RESIDUAL_LAG1, prepare
 from .inference.posterior import CONTRAST_PREFIX, DEFAULT_HELD, SPECIMEN_SD, build_posterior
 from .inference.priors import load_prior
 from .inference.results import (
@@ -172,9 +172,10 @@ def walker_start(posterior, fitted: dict) -> tuple[np.ndarray, np.ndarray]:
     return centre, cov
 
 
-def _linearisation_point(path: Path, state_path: Path, posterior) -> np.ndarray:
-    """The point a resumed run linearised its inputs' error at (``input_error_point.json``); a sampler state without
-    it, or with other parameters, was written by another likelihood and cannot be continued."""
+def _linearisation_point(path: Path, state_path: Path, posterior) -> tuple[np.ndarray, dict]:
+    """The point a resumed run linearised its inputs' error at and the AR(1) residual correlations it took there
+    (``input_error_point.json``; none in a file written before they existed); a sampler state without it, or
+    with other parameters, was written by another likelihood and cannot be continued."""
     if not path.exists():
         raise PeanoBayesInputError(
             f"{state_path}: no {path.name} beside it: the state was written by an earlier version of peano-bayes, "
@@ -186,7 +187,7 @@ def _linearisation_point(path: Path, state_path: Path, posterior) -> np.ndarray:
             f"{path}: linearised over the parameters {', '.join(stored.get('names') or [])}; this fit samples "
             f"{', '.join(posterior.names)}. Run again without --resume"
         )
-    return np.asarray(stored["theta"], dtype=float)
+    return np.asarray(stored["theta"], dtype=float), dict(stored.get("residual_lag1", {}))
 
 
 def _model_choice(dataset: Dataset, config, out: Path, *, discover: bool, resume: bool, seed: int, log, centre=None):
@@ -323,13 +324,25 @@ def infer(
             f"{code}: mode with exact inputs found in {laplace.steps} steps, {laplace.seconds:.1f} s, log posterior "
             f"{laplace.log_prob:.1f}" + (f" ({laplace.status})" if laplace.status else "")
         )
-    # The fitted inputs' error is linearised once, at the exact-input mode (Posterior.with_input_error_at); a
-    # resumed run reads that point back, so it samples the same posterior.
+    # The fitted inputs' error is linearised once, at the exact-input mode (Posterior.with_input_error_at); a test
+    # whose residuals there are correlated from bin to bin (a misfit with structure) is sampled with AR(1)
+    # residuals of that correlation. A resumed run reads both back, so it samples the same posterior.
     if laplace is not None:
-        write_text(linearised_path, json.dumps({"names": list(posterior.names), "theta": laplace.mode.tolist()}))
         posterior = posterior.with_input_error_at(laplace.mode)
+        at_mode = residual_correlation(posterior.params(laplace.mode), posterior.observations, config)
+        lag1 = structured_lag1(at_mode)
+        record = {"names": list(posterior.names), "theta": laplace.mode.tolist(), "residual_lag1": lag1}
+        write_text(linearised_path, json.dumps(record))
     else:
-        posterior = posterior.with_input_error_at(_linearisation_point(linearised_path, state_path, posterior))
+        point, lag1 = _linearisation_point(linearised_path, state_path, posterior)
+        posterior = posterior.with_input_error_at(point)
+    for test, rho in lag1.items():
+        log(
+            f"{code}: the {test} residuals at the mode are correlated from bin to bin (lag-1 {rho:.2f}): the model "
+            f"misses structure in these data; they are sampled as AR(1) residuals with lag-1 "
+            f"{min(rho, MAX_RESIDUAL_LAG1):.2f}, which widens the intervals they inform"
+        )
+    posterior = posterior.with_residual_lag1(lag1)
     t0 = time.perf_counter()
     posterior.batched(np.tile(centre, (rows, 1)))
     timings["compile_s"] = time.perf_counter() - t0
@@ -382,11 +395,17 @@ def infer(
     # Whether each test's misfit is noise: the likelihood's intervals hold only if it is.
     correlation = residual_correlation(params_mean, posterior.observations, config, predicted)
     for test, c in correlation.items():
+        c["likelihood_lag1"] = None if test not in lag1 else min(lag1[test], MAX_RESIDUAL_LAG1)
         if not c["consistent_with_noise"]:
             log(
                 f"{code}: WARNING: the {test} residuals at the posterior mean are correlated from bin to bin "
-                f"(lag-1 {c['lag1']:.2f}): the model misses structure in these data, and the intervals it informs "
-                f"are too narrow (roughly {c['interval_factor']:.1f}x, as for AR(1) residuals)"
+                f"(lag-1 {c['lag1']:.2f}): the model misses structure in these data"
+                + (
+                    f"; the likelihood took them as AR(1) residuals (lag-1 {c['likelihood_lag1']:.2f})"
+                    if test in lag1
+                    else f", and the intervals it informs are too narrow (roughly {c['interval_factor']:.1f}x, as "
+                    "for AR(1) residuals)"
+                )
                 + ("" if conv.converged else "; the run has not converged, so its mean may not be a fit yet")
             )
     summary = {
@@ -606,19 +625,36 @@ def index_markdown(
         for test, q in s["fit_quality_posterior_mean"].items():
             c = correlation.get(test)
             lag = "" if c is None or c["lag1"] is None else f"{c['lag1']:.2f}"
-            lag += "" if c is None or c["consistent_with_noise"] else " (structured)"
+            if c is not None and not c["consistent_with_noise"]:
+                used = c.get("likelihood_lag1")
+                lag += " (structured)" if used is None else f" (structured; sampled as AR(1), lag-1 {used:.2f})"
             lines.append(
                 f"| {test} | {format_number(q['rmse'], nonfinite=None)} {q['unit']} | "
                 f"{format_number(q['max_error'], nonfinite=None)} {q['unit']} | {q['r2']:.4f} | {lag} |"
             )
         structured = [t for t, c in correlation.items() if not c["consistent_with_noise"]]
+        adopted = [t for t in structured if correlation[t].get("likelihood_lag1") is not None]
+        unadopted = [t for t in structured if t not in adopted]
         if structured:
             lines += [
                 "",
                 f"**Misfit with structure** in {', '.join(structured)}: the whitened residuals at the posterior "
-                "mean are correlated from bin to bin, so the model misses something these data show, and the "
-                "intervals these tests inform are narrower than the data justify (`residual_correlation` in "
-                "`summary.json` gives a rough factor, as for AR(1) residuals). Try `--discover`.",
+                "mean are correlated from bin to bin, so the model misses something these data show. "
+                + (
+                    f"The likelihood took the residuals of {', '.join(adopted)} as AR(1) from bin to bin, with "
+                    "the correlation found at the posterior mode, so the intervals they inform are widened for "
+                    "it; the values are those of the closest model in the family, not of a model that explains "
+                    "the data. "
+                    if adopted
+                    else ""
+                )
+                + (
+                    f"The intervals that {', '.join(unadopted)} inform are narrower than the data justify "
+                    "(`residual_correlation` in `summary.json` gives a rough factor, as for AR(1) residuals). "
+                    if unadopted
+                    else ""
+                )
+                + "Try `--discover`.",
             ]
         reference = (references or {}).get(s["material"])
         ours = s["fit_quality_posterior_mean"].get("load_cycle")

@@ -9,7 +9,7 @@ import pytest
 from scipy import stats
 
 from peano_bayes.inference.denoise import fit_error_basis, piecewise_linear_segments
-from peano_bayes.inference.fit import residual_correlation
+from peano_bayes.inference.fit import residual_correlation, structured_lag1
 from peano_bayes.inference.likelihood import (
     _input_error_correction,
     bin_noise_sd,
@@ -18,6 +18,7 @@ from peano_bayes.inference.likelihood import (
     linearise_input_error,
     prepare,
     whitened_residuals,
+    with_residual_lag1,
 )
 from peano_bayes.physics import DEFAULT_CONFIG
 from peano_bayes.rig import RigNoise, simulate_dataset
@@ -73,7 +74,7 @@ def test_woodbury_correction_is_the_dense_gaussian():
     weight[1, 3] = 0.0  # an unmeasured bin
     residual[1, 3] = 0.0
     jac = rng.normal(size=(2, q, m)) * 0.4
-    correction = np.asarray(_input_error_correction(residual, weight, jac, jnp.asarray(shared), 2))
+    correction = np.asarray(_input_error_correction(residual, weight, jac[shared], jnp.asarray(shared), 2))
     for j in range(2):
         rows = np.flatnonzero(shared == j)
         mask = weight[rows].ravel() > 0
@@ -232,3 +233,68 @@ def test_residual_correlation_tells_noise_from_a_misfit_with_structure(load_cycl
     assert held.input_jacobian is not None
     live = whitened_residuals(params, obs.groups[0], geometry=obs.geometry)
     np.testing.assert_allclose(whitened_residuals(params, held, geometry=obs.geometry), live, rtol=0, atol=1e-5)
+
+
+def ar1_correlation(measured: np.ndarray, lag1: float) -> np.ndarray:
+    """(n, n) correlation of a run's measured bins (``measured`` (m,) bool) under AR(1) from bin to bin, each
+    stretch of consecutive measured bins on its own (an unmeasured bin breaks the chain): lag1^|i - j| within a
+    stretch, 0 across."""
+    stretch = np.cumsum(~measured)[measured]  # bins of one stretch share the count of gaps before them
+    index = np.flatnonzero(measured)
+    same = stretch[:, None] == stretch[None, :]
+    return np.where(same, lag1 ** np.abs(index[:, None] - index[None, :]), 0.0)
+
+
+def test_ar1_residuals_are_the_dense_gaussian_with_the_inputs_error(load_cycles):
+    """With ``residual_lag1`` set, each shared simulation's runs have the dense Gaussian density with covariance
+    S R S + (1 J)(1 J)^T, R block-diagonal over runs and over the stretches between unmeasured bins with entries
+    lag1^|i - j| (built here from that formula, not from the likelihood's filter); without the inputs' error,
+    S R S alone. Lag-1 0 is the independent likelihood."""
+    obs, params = load_cycles
+    frozen = linearise_input_error(params, obs)
+    group = frozen.groups[0]
+    observed = np.asarray(group.observed).copy()
+    observed[0, 7] = np.nan  # a gap inside the first run
+    group = replace(group, observed=observed)
+    moved = {**params, "tensile_ka_n_per_m": params["tensile_ka_n_per_m"] * 1.02}  # residuals with some shape
+    for lag1 in (0.0, 0.6, 0.97):
+        ar = with_residual_lag1(replace(frozen, groups=(group,)), {"load_cycle": lag1}).groups[0]
+        assert float(ar.residual_lag1) == lag1
+        for with_error in (True, False):
+            g = ar if with_error else replace(ar, strain_error=None, pressure_error=None, input_jacobian=None)
+            predicted, scale, ll = (np.asarray(a) for a in group_log_likelihood(moved, g, geometry=obs.geometry))
+            shared = np.asarray(g.shared)
+            for j in range(g.specimen_index.shape[0]):
+                rows = np.flatnonzero(shared == j)
+                measured = np.isfinite(observed[rows])
+                residual = (observed[rows] - predicted[rows])[measured]
+                sd = scale[rows][measured]
+                blocks = [ar1_correlation(measured[i], lag1) for i in range(rows.size)]
+                size = sum(b.shape[0] for b in blocks)
+                corr, at = np.zeros((size, size)), 0
+                for b in blocks:
+                    corr[at : at + b.shape[0], at : at + b.shape[0]] = b
+                    at += b.shape[0]
+                cov = sd[:, None] * corr * sd[None, :]
+                if with_error:
+                    u = np.concatenate([np.asarray(g.input_jacobian)[j].T] * rows.size)[measured.ravel()]
+                    cov = cov + u @ u.T
+                dense = stats.multivariate_normal(np.zeros(residual.size), cov).logpdf(residual)
+                assert float(ll[rows].sum()) == pytest.approx(dense, rel=1e-9), (lag1, with_error, j)
+    independent = np.asarray(group_log_likelihood(moved, group, geometry=obs.geometry)[2])
+    zero = with_residual_lag1(replace(frozen, groups=(group,)), {"load_cycle": 0.0}).groups[0]
+    np.testing.assert_allclose(np.asarray(group_log_likelihood(moved, zero, geometry=obs.geometry)[2]), independent,
+                               rtol=1e-12, atol=1e-9)  # fmt: skip
+
+
+def test_only_a_structured_test_gets_ar1_residuals_and_its_correlation_is_capped(load_cycles):
+    """``structured_lag1`` names the tests whose residual check fails and nothing else (data the model explains
+    keep independent bins); ``with_residual_lag1`` clips what it is given to [0, 0.99]."""
+    obs, params = load_cycles
+    assert structured_lag1(residual_correlation(params, obs, DEFAULT_CONFIG)) == {}
+    flagged = {"load_cycle": {"lag1": 0.995, "consistent_with_noise": False}, "stroke": {"lag1": 0.1,
+               "consistent_with_noise": True}}  # fmt: skip
+    assert structured_lag1(flagged) == {"load_cycle": 0.995}
+    capped = with_residual_lag1(obs, structured_lag1(flagged))
+    assert all(float(g.residual_lag1) == 0.99 for g in capped.groups)
+    assert all(g.residual_lag1 is None for g in with_residual_lag1(obs, {"stroke": 0.5}).groups)

@@ -68,6 +68,12 @@ def test_the_results_page_flags_a_test_whose_residuals_have_structure():
     page = index_markdown([{**summary, "residual_correlation": {"load_cycle": correlated}}])
     assert "| load_cycle | 2.1 N | 5.4 N | 0.9975 | 0.95 (structured) |" in page
     assert "**Misfit with structure** in load_cycle" in page
+    assert "The intervals that load_cycle inform are narrower than the data justify" in page
+    adopted = index_markdown(
+        [{**summary, "residual_correlation": {"load_cycle": {**correlated, "likelihood_lag1": 0.93}}}]
+    )
+    assert "| 0.95 (structured; sampled as AR(1), lag-1 0.93) |" in adopted
+    assert "took the residuals of load_cycle as AR(1)" in adopted and "narrower than the data" not in adopted
     quiet = index_markdown([{**summary, "residual_correlation": {"load_cycle": white}}])
     assert "| load_cycle | 2.1 N | 5.4 N | 0.9975 | -0.03 |" in quiet and "Misfit with structure" not in quiet
 
@@ -107,7 +113,8 @@ def test_the_results_page_names_a_bundled_dataset_by_its_place_in_the_package():
 
 
 def test_a_resumed_state_needs_the_point_its_input_error_was_linearised_at(tmp_path):
-    """A resume reads the linearisation point back; a state without it (an earlier version's likelihood) or with
+    """A resume reads the linearisation point and the AR(1) residual correlations taken there back (none in a file
+    written before they existed); a state without it (an earlier version's likelihood) or with
     other parameters is refused with a message naming the file and what to do."""
     posterior = SimpleNamespace(names=("a", "b"))
     path, state = tmp_path / "input_error_point.json", tmp_path / "sampler_state.npz"
@@ -116,5 +123,9 @@ def test_a_resumed_state_needs_the_point_its_input_error_was_linearised_at(tmp_p
     path.write_text(json.dumps({"names": ["a", "c"], "theta": [1.0, 2.0]}))
     with pytest.raises(PeanoBayesInputError, match="linearised over the parameters a, c; this fit samples a, b"):
         _linearisation_point(path, state, posterior)
-    path.write_text(json.dumps({"names": ["a", "b"], "theta": [1.0, 0.1 + 0.2]}))
-    np.testing.assert_array_equal(_linearisation_point(path, state, posterior), [1.0, 0.1 + 0.2])
+    path.write_text(json.dumps({"names": ["a", "b"], "theta": [1.0, 0.1 + 0.2]}))  # written before AR(1) residuals
+    theta, lag1 = _linearisation_point(path, state, posterior)
+    np.testing.assert_array_equal(theta, [1.0, 0.1 + 0.2])
+    assert lag1 == {}
+    path.write_text(json.dumps({"names": ["a", "b"], "theta": [1.0, 2.0], "residual_lag1": {"blocking": 0.97}}))
+    assert _linearisation_point(path, state, posterior)[1] == {"blocking": 0.97}

@@ -214,6 +214,14 @@ def residual_correlation(params, observations: Observations, config: ModelConfig
     return out
 
 
+def structured_lag1(correlation: dict) -> dict[str, float]:
+    """test -> lag-1 correlation of every test that :func:`residual_correlation` found structured: what the
+    likelihood then takes as its residuals' AR(1) correlation
+    (:meth:`~peano_bayes.inference.posterior.Posterior.with_residual_lag1`). Tests consistent with noise keep
+    independent bins, so data the model explains are sampled exactly as before."""
+    return {t: float(c["lag1"]) for t, c in correlation.items() if not c["consistent_with_noise"]}
+
+
 def _noise_from_residuals(observations: Observations, predicted) -> dict:
     """Per raw sample: sqrt(mean(count * error^2)) over each noise parameter's tests; ``predicted``: each
     group's prediction."""
@@ -330,4 +338,5 @@ __all__ = [
     "predictions",
     "residual_correlation",
     "residual_function",
+    "structured_lag1",
 ]

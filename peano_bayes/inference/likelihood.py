@@ -39,6 +39,15 @@ bins of every run sharing the simulation; :func:`group_log_likelihood` integrate
 identity, a q x q solve per simulated input; q = 2 per ramp and 1 per hold of each fitted input, a load cycle's
 strain and pressure each with their own columns). Its Jacobian can be computed once, at a point, and held
 (:func:`linearise_input_error`; ``fit`` does so at the exact-input mode).
+
+**Residuals with structure (AR(1) from bin to bin):** the bins are independent given the model, unless a test's
+group carries ``residual_lag1`` (:func:`with_residual_lag1`): then each run's standardized residuals are a
+stationary AR(1) sequence in bin order with that lag-1 correlation (each bin's marginal sd is still its noise
+sd), and each bin's log-likelihood is its density given the bin before it (:func:`ar1_innovations`; an
+unmeasured bin restarts the chain). Whitening by that filter is linear, so the inputs' error is integrated as
+above on the whitened residuals and error columns. ``fit`` sets it only for a test whose residuals at the mode
+fail the check of :func:`~peano_bayes.inference.fit.residual_correlation`: a model that cannot take the data's
+shape leaves a smooth misfit that independent bins would count as hundreds of independent pieces of evidence.
 """
 
 from __future__ import annotations
@@ -155,7 +164,9 @@ class RunGroup:
     ``bin_nodes`` (u, p m) int: where each bin's ``p`` points sit among a row's ``L >= p m`` simulated points
     (the others are samples where the input path turns, :func:`with_path_samples`), so the simulated arrays
     are (u, L); ``input_jacobian`` (u, q, m) or ``None``: the predictions' derivative along the error columns,
-    held fixed when set (:func:`linearise_input_error`), else computed at every evaluation.
+    held fixed when set (:func:`linearise_input_error`), else computed at every evaluation;
+    ``residual_lag1`` () or ``None``: the lag-1 correlation of the residuals from bin to bin within a run, when
+    the likelihood takes them as AR(1) (:func:`with_residual_lag1`), else independent.
     """
 
     test: str
@@ -175,6 +186,7 @@ class RunGroup:
     pressure_error: np.ndarray | None = None
     added_compliance_m_per_n: np.ndarray | None = None
     input_jacobian: np.ndarray | None = None
+    residual_lag1: np.ndarray | None = None
 
     @property
     def has_input_error(self) -> bool:
@@ -225,6 +237,7 @@ jax.tree_util.register_dataclass(
         "bin_nodes",
         "added_compliance_m_per_n",
         "input_jacobian",
+        "residual_lag1",
     ],
     meta_fields=["test", "keys"],
 )
@@ -712,9 +725,11 @@ def predict(params, group: RunGroup, *, config: ModelConfig = DEFAULT_CONFIG, ge
 
 
 def _without_jacobian(group: RunGroup) -> RunGroup:
-    """``group`` without its held Jacobian (which the simulation does not read), so a linearised group reuses the
-    compiled prediction of the plain one."""
-    return group if group.input_jacobian is None else replace(group, input_jacobian=None)
+    """``group`` without what only the likelihood reads (its held Jacobian and residual correlation), so a
+    linearised group reuses the compiled prediction of the plain one."""
+    if group.input_jacobian is None and group.residual_lag1 is None:
+        return group
+    return replace(group, input_jacobian=None, residual_lag1=None)
 
 
 @eqx.filter_jit
@@ -777,21 +792,37 @@ def linearise_input_error(params, observations: Observations, *, config: ModelCo
     return replace(observations, groups=tuple(groups))
 
 
-def _input_error_correction(residual, weight, jac, shared, n_sets: int):
+def _input_error_correction(residual, weight, per_run, shared, n_sets: int):
     """Per simulated row (u,): the change of the log-likelihood of its runs' residuals when the fitted inputs'
     error ``J a``, ``a ~ N(0, I_q)``, is integrated out, ``b^T A^-1 b / 2 - ln det A / 2`` with
     ``A = I + sum_runs J^T W J`` and ``b = sum_runs J^T W r`` (Woodbury; ``W`` = ``weight`` (r, m), the inverse
-    bin variances, zero where unmeasured; ``residual`` (r, m); ``jac`` (u, q, m))."""
-    per_run = jac[shared]  # (r, q, m)
+    bin variances, zero where unmeasured; ``residual`` (r, m); ``per_run`` (r, q, m), each run's ``J``; its
+    simulated row ``shared`` (r,)). Residuals and ``J`` whitened by the same linear map, with weight 1, give the
+    integral under that map's covariance."""
     gram = jnp.einsum("rqm,rm,rpm->rqp", per_run, weight, per_run)
     proj = jnp.einsum("rqm,rm,rm->rq", per_run, weight, residual)
     gram = jax.ops.segment_sum(gram, shared, num_segments=n_sets)
     proj = jax.ops.segment_sum(proj, shared, num_segments=n_sets)
-    a = jnp.eye(jac.shape[1]) + gram
+    a = jnp.eye(per_run.shape[1]) + gram
     chol = jnp.linalg.cholesky(a)
     solved = jax.scipy.linalg.cho_solve((chol, True), proj[..., None])[..., 0]
     log_det = 2.0 * jnp.sum(jnp.log(jnp.diagonal(chol, axis1=-2, axis2=-1)), axis=-1)
     return 0.5 * jnp.sum(proj * solved, axis=-1) - 0.5 * log_det
+
+
+def ar1_innovations(x, measured, lag1):
+    """Whiten ``x`` (r, m) or (r, q, m), bins of each run in time order along the last axis, under AR(1)
+    correlation ``lag1`` from bin to bin: ``(x_t - lag1 x_(t-1)) / sqrt(1 - lag1^2)`` where bin ``t - 1`` of the
+    run is measured too, else ``x_t`` (a run's first bin, or one after an unmeasured bin, starts afresh: the bins
+    before the gap are treated as independent of it). ``measured`` (r, m) bool. Returns ``(innovations,
+    factor)``, ``factor`` (r, m) the sd of each innovation over that of its bin: ``sqrt(1 - lag1^2)`` or 1. For
+    standardized residuals (unit marginal variance, AR(1) correlation) the innovations are independent standard
+    normals, and the Jacobian of the map is ``1 / prod(factor)``."""
+    paired = jnp.concatenate([jnp.zeros_like(measured[:, :1]), measured[:, 1:] & measured[:, :-1]], axis=1)
+    factor = jnp.where(paired, jnp.sqrt(1.0 - lag1**2), 1.0)
+    expand = lambda a: a.reshape(a.shape[:1] + (1,) * (x.ndim - 2) + a.shape[1:])  # noqa: E731
+    earlier = jnp.concatenate([jnp.zeros_like(x[..., :1]), x[..., :-1]], axis=-1)
+    return (x - expand(jnp.where(paired, lag1, 0.0)) * earlier) / expand(factor), factor
 
 
 def _log_density(residual, scale, family: str):
@@ -849,11 +880,22 @@ def group_log_likelihood(
     else:
         predicted, solver_error = predict(model, group, config=config, geometry=geometry)
     residual = jnp.where(measured, observed, 0.0) - predicted
-    ll = jnp.where(measured, _log_density(residual, scale, family), 0.0)
+    standardized = jnp.where(measured, residual / scale, 0.0)
+    if group.residual_lag1 is None:  # independent bins
+        ll = jnp.where(measured, _log_density(residual, scale, family), 0.0)
+    else:  # AR(1) from bin to bin within a run: each bin's density given the bin before it
+        standardized, factor = ar1_innovations(standardized, measured, jnp.asarray(group.residual_lag1))
+        ll = jnp.where(measured, _log_density(standardized * scale * factor, scale * factor, family), 0.0)
     if with_input_error:
-        weight = jnp.where(measured, 1.0 / scale**2, 0.0)
+        # Whitened residuals and error columns (bin noise, then the AR(1) filter if any), weight 1 where measured.
+        per_run = jac[shared] / scale[:, None, :]
+        if group.residual_lag1 is not None:
+            per_run = ar1_innovations(per_run, measured, jnp.asarray(group.residual_lag1))[0]
         n_sets = group.specimen_index.shape[0]
-        correction = _input_error_correction(jnp.where(measured, residual, 0.0), weight, jac, shared, n_sets)
+        correction = _input_error_correction(
+            standardized, measured.astype(standardized.dtype), jnp.where(measured[:, None, :], per_run, 0.0),
+            shared, n_sets,
+        )  # fmt: skip
         # Apportioned evenly over the measured bins of the runs sharing the input, so sums are exact.
         bins = jax.ops.segment_sum(jnp.sum(measured, axis=1), shared, num_segments=n_sets)
         ll = ll + jnp.where(measured, (correction / jnp.maximum(bins, 1))[shared][:, None], 0.0)
@@ -903,6 +945,27 @@ def whitened_residuals(
     return out
 
 
+#: Largest lag-1 correlation the likelihood takes for a test's residuals (:func:`with_residual_lag1`): at 0.99 the
+#: mean of a run's residuals is sqrt(199) = 14 times as uncertain as under independent bins of the same size; nearer
+#: 1 the AR(1) model turns into a random walk whose level the data no longer fix.
+MAX_RESIDUAL_LAG1 = 0.99
+
+
+def with_residual_lag1(observations: Observations, lag1) -> Observations:
+    """``observations`` whose groups of each test in ``lag1`` (test -> lag-1 correlation) take their residuals as
+    AR(1) from bin to bin within a run with that correlation, clipped to [0, :data:`MAX_RESIDUAL_LAG1`]
+    (:attr:`RunGroup.residual_lag1`); the other groups are unchanged. The marginal sd of every bin stays the
+    test's noise scale over sqrt(samples); what changes is how much independent evidence neighbouring bins
+    carry (see ``docs/inference.md``, *Misfit with structure*)."""
+    groups = []
+    for group in observations.groups:
+        if group.test in lag1:
+            rho = float(np.clip(lag1[group.test], 0.0, MAX_RESIDUAL_LAG1))
+            group = replace(group, residual_lag1=np.asarray(rho))
+        groups.append(group)
+    return replace(observations, groups=tuple(groups))
+
+
 def pointwise_log_likelihood(
     params,
     observations: Observations,
@@ -936,6 +999,7 @@ __all__ = [
     "INPUT_ERROR_TESTS",
     "linearise_input_error",
     "LINEARISATION_STEP",
+    "MAX_RESIDUAL_LAG1",
     "NOISE_PARAMETERS",
     "SPECIMEN_OFFSET",
     "SPECIMEN_SCALED",
@@ -958,5 +1022,7 @@ __all__ = [
     "segment_bins",
     "segment_starts",
     "with_path_samples",
+    "with_residual_lag1",
+    "ar1_innovations",
     "whitened_residuals",
 ]

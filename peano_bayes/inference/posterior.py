@@ -43,6 +43,7 @@ from .likelihood import (
     Observations,
     linearise_input_error,
     pointwise_log_likelihood,
+    with_residual_lag1,
 )
 from .priors import Prior
 
@@ -291,6 +292,16 @@ class Posterior:
         again for the new group structure once)."""
         observations = linearise_input_error(self.params(jnp.asarray(theta)), self.observations, config=self.config)
         other = dataclasses.replace(self, observations=observations)
+        object.__setattr__(other, "_compiled", self._compiled)
+        return other
+
+    def with_residual_lag1(self, lag1) -> Posterior:
+        """This posterior with the residuals of each test in ``lag1`` (test -> lag-1 correlation) taken as AR(1)
+        from bin to bin (:func:`~peano_bayes.inference.likelihood.with_residual_lag1`); ``{}`` returns it
+        unchanged. The compiled functions are shared (traced again for the new group structure once)."""
+        if not lag1:
+            return self
+        other = dataclasses.replace(self, observations=with_residual_lag1(self.observations, lag1))
         object.__setattr__(other, "_compiled", self._compiled)
         return other
 
