@@ -200,7 +200,9 @@ class Replicate:
     """One SBC replicate: ``index``; ``truth`` (K,) the ranked quantities of :func:`rank_names` (theta in
     the posterior's coordinates, then the derived levels as ln of their SI values); ``rank`` (K,) of the truth
     among :data:`RANK_DRAWS` thinned draws; ``covered`` level -> (K,) bool; ``converged``; ``steps``;
-    ``tau_max``; ``seconds``; ``redraws`` truths that could not be simulated before this one."""
+    ``tau_max``; ``seconds``; ``redraws`` truths that could not be simulated before this one; ``ar1`` test ->
+    lag-1 correlation of each test sampled with AR(1) residuals (its residuals at the mode failed the structure
+    check, :func:`~peano_bayes.inference.fit.structured_lag1`; empty when none did)."""
 
     index: int
     truth: list
@@ -211,6 +213,7 @@ class Replicate:
     tau_max: float
     seconds: float
     redraws: int
+    ar1: dict
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
@@ -255,7 +258,8 @@ def run_replicate(
     exact = posterior_mode(posterior, start, np.diag(spread**2))
     posterior = posterior.with_input_error_at(exact.mode)  # as peano-bayes fit does, AR(1) residuals included
     at_mode = residual_correlation(posterior.params(exact.mode), posterior.observations, posterior.config)
-    posterior = posterior.with_residual_lag1(structured_lag1(at_mode))
+    ar1 = structured_lag1(at_mode)
+    posterior = posterior.with_residual_lag1(ar1)
     laplace = refine_mode(posterior.batched, exact, coordinates=NonCentred.of(posterior))
     result = sample(
         posterior,
@@ -287,6 +291,7 @@ def run_replicate(
         float(np.max(result.convergence.tau)),
         time.perf_counter() - t0,
         redraws,
+        ar1,
     )
 
 
