@@ -340,7 +340,7 @@ def infer(
         log(
             f"{code}: the {test} residuals at the mode are correlated from bin to bin (lag-1 {rho:.2f}): the model "
             f"misses structure in these data; they are sampled as AR(1) residuals with lag-1 "
-            f"{min(rho, MAX_RESIDUAL_LAG1):.2f}, which widens the intervals they inform"
+            f"{min(rho, MAX_RESIDUAL_LAG1):.2f}, so neighbouring bins no longer count as independent evidence"
         )
     posterior = posterior.with_residual_lag1(lag1)
     t0 = time.perf_counter()
@@ -625,26 +625,28 @@ def index_markdown(
         for test, q in s["fit_quality_posterior_mean"].items():
             c = correlation.get(test)
             lag = "" if c is None or c["lag1"] is None else f"{c['lag1']:.2f}"
+            used = None if c is None else c.get("likelihood_lag1")
             if c is not None and not c["consistent_with_noise"]:
-                used = c.get("likelihood_lag1")
                 lag += " (structured)" if used is None else f" (structured; sampled as AR(1), lag-1 {used:.2f})"
+            elif used is not None:
+                lag += f" (sampled as AR(1), lag-1 {used:.2f}: structured at the mode)"
             lines.append(
                 f"| {test} | {format_number(q['rmse'], nonfinite=None)} {q['unit']} | "
                 f"{format_number(q['max_error'], nonfinite=None)} {q['unit']} | {q['r2']:.4f} | {lag} |"
             )
-        structured = [t for t, c in correlation.items() if not c["consistent_with_noise"]]
-        adopted = [t for t in structured if correlation[t].get("likelihood_lag1") is not None]
+        adopted = [t for t, c in correlation.items() if c.get("likelihood_lag1") is not None]
+        structured = [t for t, c in correlation.items() if not c["consistent_with_noise"] or t in adopted]
         unadopted = [t for t in structured if t not in adopted]
         if structured:
             lines += [
                 "",
-                f"**Misfit with structure** in {', '.join(structured)}: the whitened residuals at the posterior "
-                "mean are correlated from bin to bin, so the model misses something these data show. "
+                f"**Misfit with structure** in {', '.join(structured)}: the whitened residuals are correlated "
+                "from bin to bin, so the model misses something these data show. "
                 + (
                     f"The likelihood took the residuals of {', '.join(adopted)} as AR(1) from bin to bin, with "
-                    "the correlation found at the posterior mode, so the intervals they inform are widened for "
-                    "it; the values are those of the closest model in the family, not of a model that explains "
-                    "the data. "
+                    "the correlation found at the posterior mode, so neighbouring bins do not count as independent "
+                    "evidence; the values are those of the closest model in the family, not of a model that "
+                    "explains the data. "
                     if adopted
                     else ""
                 )

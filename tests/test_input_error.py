@@ -235,11 +235,11 @@ def test_residual_correlation_tells_noise_from_a_misfit_with_structure(load_cycl
     np.testing.assert_allclose(whitened_residuals(params, held, geometry=obs.geometry), live, rtol=0, atol=1e-5)
 
 
-def ar1_correlation(measured: np.ndarray, lag1: float) -> np.ndarray:
+def ar1_correlation(measured: np.ndarray, restart: np.ndarray, lag1: float) -> np.ndarray:
     """(n, n) correlation of a run's measured bins (``measured`` (m,) bool) under AR(1) from bin to bin, each
-    stretch of consecutive measured bins on its own (an unmeasured bin breaks the chain): lag1^|i - j| within a
-    stretch, 0 across."""
-    stretch = np.cumsum(~measured)[measured]  # bins of one stretch share the count of gaps before them
+    stretch of consecutive measured bins on its own (an unmeasured bin, or a bin where ``restart`` (m,) is set,
+    breaks the chain): lag1^|i - j| within a stretch, 0 across."""
+    stretch = np.cumsum(~measured | restart)[measured]  # bins of one stretch share the count of breaks before them
     index = np.flatnonzero(measured)
     same = stretch[:, None] == stretch[None, :]
     return np.where(same, lag1 ** np.abs(index[:, None] - index[None, :]), 0.0)
@@ -247,12 +247,15 @@ def ar1_correlation(measured: np.ndarray, lag1: float) -> np.ndarray:
 
 def test_ar1_residuals_are_the_dense_gaussian_with_the_inputs_error(load_cycles):
     """With ``residual_lag1`` set, each shared simulation's runs have the dense Gaussian density with covariance
-    S R S + (1 J)(1 J)^T, R block-diagonal over runs and over the stretches between unmeasured bins with entries
-    lag1^|i - j| (built here from that formula, not from the likelihood's filter); without the inputs' error,
-    S R S alone. Lag-1 0 is the independent likelihood."""
+    S R S + (1 J)(1 J)^T, R block-diagonal over runs and over the stretches between unmeasured bins and segment
+    starts of the inputs, with entries lag1^|i - j| (built here from that formula, not from the likelihood's
+    filter); without the inputs' error, S R S alone. Lag-1 0 is the independent likelihood."""
     obs, params = load_cycles
     frozen = linearise_input_error(params, obs)
     group = frozen.groups[0]
+    restart = np.asarray(group.segment_start)
+    assert restart.shape == group.observed.shape and restart[:, 0].all() and restart[:, 1:].any(axis=1).all()
+    assert np.ptp(np.asarray(group.counts)) > 0  # bins of unequal size: the per-bin scale matters
     observed = np.asarray(group.observed).copy()
     observed[0, 7] = np.nan  # a gap inside the first run
     group = replace(group, observed=observed)
@@ -269,7 +272,7 @@ def test_ar1_residuals_are_the_dense_gaussian_with_the_inputs_error(load_cycles)
                 measured = np.isfinite(observed[rows])
                 residual = (observed[rows] - predicted[rows])[measured]
                 sd = scale[rows][measured]
-                blocks = [ar1_correlation(measured[i], lag1) for i in range(rows.size)]
+                blocks = [ar1_correlation(measured[i], restart[rows][i], lag1) for i in range(rows.size)]
                 size = sum(b.shape[0] for b in blocks)
                 corr, at = np.zeros((size, size)), 0
                 for b in blocks:

@@ -74,6 +74,10 @@ def test_the_results_page_flags_a_test_whose_residuals_have_structure():
     )
     assert "| 0.95 (structured; sampled as AR(1), lag-1 0.93) |" in adopted
     assert "took the residuals of load_cycle as AR(1)" in adopted and "narrower than the data" not in adopted
+    white_at_mean = {**white, "likelihood_lag1": 0.93}  # structured at the mode, not at the posterior mean
+    marked = index_markdown([{**summary, "residual_correlation": {"load_cycle": white_at_mean}}])
+    assert "| -0.03 (sampled as AR(1), lag-1 0.93: structured at the mode) |" in marked
+    assert "took the residuals of load_cycle as AR(1)" in marked
     quiet = index_markdown([{**summary, "residual_correlation": {"load_cycle": white}}])
     assert "| load_cycle | 2.1 N | 5.4 N | 0.9975 | -0.03 |" in quiet and "Misfit with structure" not in quiet
 

@@ -204,6 +204,7 @@ def _take(group: RunGroup, rows: np.ndarray, cycle: np.ndarray) -> RunGroup:
         strain_error=pick(group.strain_error),
         pressure_error=pick(group.pressure_error),
         input_jacobian=pick(group.input_jacobian),
+        segment_start=pick(group.segment_start),
     )
 
 

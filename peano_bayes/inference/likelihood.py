@@ -42,12 +42,13 @@ strain and pressure each with their own columns). Its Jacobian can be computed o
 
 **Residuals with structure (AR(1) from bin to bin):** the bins are independent given the model, unless a test's
 group carries ``residual_lag1`` (:func:`with_residual_lag1`): then each run's standardized residuals are a
-stationary AR(1) sequence in bin order with that lag-1 correlation (each bin's marginal sd is still its noise
-sd), and each bin's log-likelihood is its density given the bin before it (:func:`ar1_innovations`; an
-unmeasured bin restarts the chain). Whitening by that filter is linear, so the inputs' error is integrated as
-above on the whitened residuals and error columns. ``fit`` sets it only for a test whose residuals at the mode
-fail the check of :func:`~peano_bayes.inference.fit.residual_correlation`: a model that cannot take the data's
-shape leaves a smooth misfit that independent bins would count as hundreds of independent pieces of evidence.
+stationary AR(1) sequence in bin order with that lag-1 correlation (each bin's marginal sd is still its noise sd),
+and each bin's log-likelihood is its density given the bin before it (:func:`ar1_innovations`; a chain starts
+afresh at each segment of the commanded inputs, where a misfit may jump, and after an unmeasured bin). Whitening by
+that filter is linear, so the inputs' error is integrated as above on the whitened residuals and error columns.
+``fit`` sets it only for a test whose residuals at the mode fail the check of
+:func:`~peano_bayes.inference.fit.residual_correlation`: a model that cannot take the data's shape leaves a smooth
+misfit that independent bins would count as hundreds of independent pieces of evidence.
 """
 
 from __future__ import annotations
@@ -166,7 +167,9 @@ class RunGroup:
     are (u, L); ``input_jacobian`` (u, q, m) or ``None``: the predictions' derivative along the error columns,
     held fixed when set (:func:`linearise_input_error`), else computed at every evaluation;
     ``residual_lag1`` () or ``None``: the lag-1 correlation of the residuals from bin to bin within a run, when
-    the likelihood takes them as AR(1) (:func:`with_residual_lag1`), else independent.
+    the likelihood takes them as AR(1) (:func:`with_residual_lag1`), else independent; ``segment_start`` (r, m)
+    bool or ``None``: the bins that begin a segment of the run's commanded inputs (per-segment binning only;
+    an AR(1) chain starts afresh there).
     """
 
     test: str
@@ -187,6 +190,7 @@ class RunGroup:
     added_compliance_m_per_n: np.ndarray | None = None
     input_jacobian: np.ndarray | None = None
     residual_lag1: np.ndarray | None = None
+    segment_start: np.ndarray | None = None
 
     @property
     def has_input_error(self) -> bool:
@@ -238,6 +242,7 @@ jax.tree_util.register_dataclass(
         "added_compliance_m_per_n",
         "input_jacobian",
         "residual_lag1",
+        "segment_start",
     ],
     meta_fields=["test", "keys"],
 )
@@ -460,6 +465,7 @@ def _reduce_run(
         known = [] if known_segments is None else known_segments
         starts = _snap(merge_adjacent(segment_starts(smooth)), known)
         k = segment_bins(starts, n, per_segment)
+        out["segment_start"] = np.isin(k, merge_adjacent(starts))
     one_per_bin = np.ndim(k) == 0 and k == 1
     centre, _ = bin_means(run.time_s, k)
     if one_per_bin:
@@ -633,6 +639,9 @@ def prepare(
                 pressure_error=errors["pressure_pa"],
                 bin_nodes=np.stack([members[i][1]["bin_nodes"] for i in simulated]),
                 added_compliance_m_per_n=np.array([members[i][1]["added_compliance"] for i in simulated]),
+                segment_start=np.stack([red["segment_start"] for _, red in members])
+                if all("segment_start" in red for _, red in members)
+                else None,
             )
         )
     return Observations(specimens, tuple(groups), bin_sizes, dataset.geometry, per_segment)
@@ -719,14 +728,14 @@ def predict(params, group: RunGroup, *, config: ModelConfig = DEFAULT_CONFIG, ge
     ``exp(offset[name][s])`` (the hierarchical model of :class:`~peano_bayes.inference.posterior.Posterior`).
     """
     strain, pressure = jnp.asarray(group.strain), jnp.asarray(group.pressure_pa)
-    predicted, error = _sets_function(geometry)(params, _without_jacobian(group), strain, pressure, config, geometry)
+    predicted, error = _sets_function(geometry)(params, _as_simulated(group), strain, pressure, config, geometry)
     shared = jnp.asarray(group.shared)
     return predicted[shared], error[shared]
 
 
-def _without_jacobian(group: RunGroup) -> RunGroup:
-    """``group`` without what only the likelihood reads (its held Jacobian and residual correlation), so a
-    linearised group reuses the compiled prediction of the plain one."""
+def _as_simulated(group: RunGroup) -> RunGroup:
+    """``group`` without what only the likelihood reads (its held Jacobian and AR(1) residual correlation), so a
+    linearised or AR(1) group reuses the compiled prediction of the plain one."""
     if group.input_jacobian is None and group.residual_lag1 is None:
         return group
     return replace(group, input_jacobian=None, residual_lag1=None)
@@ -778,7 +787,7 @@ def linearise_input_error(params, observations: Observations, *, config: ModelCo
     groups = []
     for group in observations.groups:
         if group.has_input_error:
-            plain = _without_jacobian(group)
+            plain = _as_simulated(group)
             strain, pressure = np.asarray(group.strain), np.asarray(group.pressure_pa)
             columns = []
             for ds, dp in zip(*(np.swapaxes(np.asarray(d), 0, 1) for d in _error_columns(group)), strict=True):
@@ -810,15 +819,18 @@ def _input_error_correction(residual, weight, per_run, shared, n_sets: int):
     return 0.5 * jnp.sum(proj * solved, axis=-1) - 0.5 * log_det
 
 
-def ar1_innovations(x, measured, lag1):
+def ar1_innovations(x, measured, lag1, restart=None):
     """Whiten ``x`` (r, m) or (r, q, m), bins of each run in time order along the last axis, under AR(1)
     correlation ``lag1`` from bin to bin: ``(x_t - lag1 x_(t-1)) / sqrt(1 - lag1^2)`` where bin ``t - 1`` of the
-    run is measured too, else ``x_t`` (a run's first bin, or one after an unmeasured bin, starts afresh: the bins
-    before the gap are treated as independent of it). ``measured`` (r, m) bool. Returns ``(innovations,
+    run is measured too, else ``x_t``. A run's first bin, a bin after an unmeasured one and a bin where
+    ``restart`` (r, m) bool is set (the start of a segment of the commanded inputs) start afresh: the chain
+    before them is taken as independent of them. ``measured`` (r, m) bool. Returns ``(innovations,
     factor)``, ``factor`` (r, m) the sd of each innovation over that of its bin: ``sqrt(1 - lag1^2)`` or 1. For
     standardized residuals (unit marginal variance, AR(1) correlation) the innovations are independent standard
     normals, and the Jacobian of the map is ``1 / prod(factor)``."""
     paired = jnp.concatenate([jnp.zeros_like(measured[:, :1]), measured[:, 1:] & measured[:, :-1]], axis=1)
+    if restart is not None:
+        paired = paired & ~jnp.asarray(restart, dtype=bool)
     factor = jnp.where(paired, jnp.sqrt(1.0 - lag1**2), 1.0)
     expand = lambda a: a.reshape(a.shape[:1] + (1,) * (x.ndim - 2) + a.shape[1:])  # noqa: E731
     earlier = jnp.concatenate([jnp.zeros_like(x[..., :1]), x[..., :-1]], axis=-1)
@@ -874,28 +886,28 @@ def group_log_likelihood(
         predicted, solver_error = predict(model, group, config=config, geometry=geometry)
         jac, shared = jnp.asarray(group.input_jacobian), jnp.asarray(group.shared)
     elif with_input_error:
-        sets, solver_error, jac = input_error_jacobian(model, group, config=config, geometry=geometry)
+        sets, solver_error, jac = input_error_jacobian(model, _as_simulated(group), config=config, geometry=geometry)
         shared = jnp.asarray(group.shared)
         predicted, solver_error = sets[shared], solver_error[shared]
     else:
         predicted, solver_error = predict(model, group, config=config, geometry=geometry)
     residual = jnp.where(measured, observed, 0.0) - predicted
-    standardized = jnp.where(measured, residual / scale, 0.0)
+    n_sets = group.specimen_index.shape[0]
     if group.residual_lag1 is None:  # independent bins
         ll = jnp.where(measured, _log_density(residual, scale, family), 0.0)
-    else:  # AR(1) from bin to bin within a run: each bin's density given the bin before it
-        standardized, factor = ar1_innovations(standardized, measured, jnp.asarray(group.residual_lag1))
+        if with_input_error:
+            weight = jnp.where(measured, 1.0 / scale**2, 0.0)
+            masked = jnp.where(measured, residual, 0.0)
+            correction = _input_error_correction(masked, weight, jac[shared], shared, n_sets)
+    else:  # AR(1) within each segment of a run: each bin's density given the bin before it
+        lag1, restart = jnp.asarray(group.residual_lag1), group.segment_start
+        standardized, factor = ar1_innovations(jnp.where(measured, residual / scale, 0.0), measured, lag1, restart)
         ll = jnp.where(measured, _log_density(standardized * scale * factor, scale * factor, family), 0.0)
+        if with_input_error:  # the same whitening on the error's columns, then weight 1 where measured
+            per_run = ar1_innovations(jac[shared] / scale[:, None, :], measured, lag1, restart)[0]
+            per_run = jnp.where(measured[:, None, :], per_run, 0.0)
+            correction = _input_error_correction(standardized, measured.astype(scale.dtype), per_run, shared, n_sets)
     if with_input_error:
-        # Whitened residuals and error columns (bin noise, then the AR(1) filter if any), weight 1 where measured.
-        per_run = jac[shared] / scale[:, None, :]
-        if group.residual_lag1 is not None:
-            per_run = ar1_innovations(per_run, measured, jnp.asarray(group.residual_lag1))[0]
-        n_sets = group.specimen_index.shape[0]
-        correction = _input_error_correction(
-            standardized, measured.astype(standardized.dtype), jnp.where(measured[:, None, :], per_run, 0.0),
-            shared, n_sets,
-        )  # fmt: skip
         # Apportioned evenly over the measured bins of the runs sharing the input, so sums are exact.
         bins = jax.ops.segment_sum(jnp.sum(measured, axis=1), shared, num_segments=n_sets)
         ll = ll + jnp.where(measured, (correction / jnp.maximum(bins, 1))[shared][:, None], 0.0)
@@ -923,7 +935,7 @@ def whitened_residuals(
     model = _model_parameters(params)
     scale = np.asarray(bin_noise_sd(params[OBSERVED[group.test][1]], group))
     if group.has_input_error and group.input_jacobian is None:
-        sets, _, jac = input_error_jacobian(model, group, config=config, geometry=geometry)
+        sets, _, jac = input_error_jacobian(model, _as_simulated(group), config=config, geometry=geometry)
         predicted = np.asarray(sets)[group.shared]
     else:
         jac = group.input_jacobian
@@ -946,8 +958,9 @@ def whitened_residuals(
 
 
 #: Largest lag-1 correlation the likelihood takes for a test's residuals (:func:`with_residual_lag1`): at 0.99 the
-#: mean of a run's residuals is sqrt(199) = 14 times as uncertain as under independent bins of the same size; nearer
-#: 1 the AR(1) model turns into a random walk whose level the data no longer fix.
+#: mean of a long AR(1) sequence is sqrt(199) = 14 times as uncertain as that of independent bins of the same size
+#: (less over a segment of ~100 bins, about 1 / (1 - lag1) bins long); nearer 1 the AR(1) model turns into a random
+#: walk whose level the data no longer fix.
 MAX_RESIDUAL_LAG1 = 0.99
 
 
@@ -1008,6 +1021,7 @@ __all__ = [
     "SOLVER_TOLERANCE",
     "Observations",
     "RunGroup",
+    "ar1_innovations",
     "bin_means",
     "bin_noise_sd",
     "group_log_likelihood",
@@ -1021,8 +1035,7 @@ __all__ = [
     "sample_times",
     "segment_bins",
     "segment_starts",
+    "whitened_residuals",
     "with_path_samples",
     "with_residual_lag1",
-    "ar1_innovations",
-    "whitened_residuals",
 ]

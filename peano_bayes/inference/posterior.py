@@ -103,8 +103,8 @@ class Posterior:
     family: str = "gaussian"
     batch_rows: int | None = None
     # Compiled functions, shared (by reference) with the posteriors made by :meth:`with_observations`,
-    # :meth:`with_batch_rows` and :meth:`with_input_error_at`; any other ``dataclasses.replace`` (another prior,
-    # fixed values or family) starts an empty one.
+    # :meth:`with_batch_rows`, :meth:`with_input_error_at` and :meth:`with_residual_lag1`; any other
+    # ``dataclasses.replace`` (another prior, fixed values or family) starts an empty one.
     _compiled: dict = field(default_factory=dict, repr=False, init=False)
 
     @property
