@@ -33,9 +33,9 @@ from .defaults import (
 from .errors import PeanoBayesInputError
 from .formatting import format_number
 from .inference.coordinates import sampler_coordinates
-from .inference.fit import fit, fit_quality, predictions, residual_correlation, structured_lag1
+from .inference.fit import fit, fit_quality, predictions, residual_correlation
 from .inference.laplace import NonCentred, posterior_mode, refine_mode
-from .inference.likelihood import MAX_RESIDUAL_LAG1, prepare
+from .inference.likelihood import prepare
 from .inference.posterior import CONTRAST_PREFIX, DEFAULT_HELD, SPECIMEN_SD, build_posterior
 from .inference.priors import load_prior
 from .inference.results import (
@@ -329,20 +329,19 @@ def infer(
     # residuals of that correlation. A resumed run reads both back, so it samples the same posterior.
     if laplace is not None:
         posterior = posterior.with_input_error_at(laplace.mode)
-        at_mode = residual_correlation(posterior.params(laplace.mode), posterior.observations, config)
-        lag1 = structured_lag1(at_mode)
+        lag1 = posterior.residual_lag1_at(laplace.mode)
         record = {"names": list(posterior.names), "theta": laplace.mode.tolist(), "residual_lag1": lag1}
         write_text(linearised_path, json.dumps(record))
     else:
         point, lag1 = _linearisation_point(linearised_path, state_path, posterior)
         posterior = posterior.with_input_error_at(point)
+    posterior = posterior.with_residual_lag1(lag1)
     for test, rho in lag1.items():
         log(
             f"{code}: the {test} residuals at the mode are correlated from bin to bin (lag-1 {rho:.2f}): the model "
             f"misses structure in these data; they are sampled as AR(1) residuals with lag-1 "
-            f"{min(rho, MAX_RESIDUAL_LAG1):.2f}, so neighbouring bins no longer count as independent evidence"
+            f"{posterior.residual_lag1[test]:.2f}, so neighbouring bins no longer count as independent evidence"
         )
-    posterior = posterior.with_residual_lag1(lag1)
     t0 = time.perf_counter()
     posterior.batched(np.tile(centre, (rows, 1)))
     timings["compile_s"] = time.perf_counter() - t0
@@ -395,14 +394,14 @@ def infer(
     # Whether each test's misfit is noise: the likelihood's intervals hold only if it is.
     correlation = residual_correlation(params_mean, posterior.observations, config, predicted)
     for test, c in correlation.items():
-        c["likelihood_lag1"] = None if test not in lag1 else min(lag1[test], MAX_RESIDUAL_LAG1)
+        c["likelihood_lag1"] = posterior.residual_lag1.get(test)
         if not c["consistent_with_noise"]:
             log(
                 f"{code}: WARNING: the {test} residuals at the posterior mean are correlated from bin to bin "
                 f"(lag-1 {c['lag1']:.2f}): the model misses structure in these data"
                 + (
                     f"; the likelihood took them as AR(1) residuals (lag-1 {c['likelihood_lag1']:.2f})"
-                    if test in lag1
+                    if c["likelihood_lag1"] is not None
                     else f", and the intervals it informs are too narrow (roughly {c['interval_factor']:.1f}x, as "
                     "for AR(1) residuals)"
                 )

@@ -12,6 +12,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -129,14 +130,18 @@ def residual_function(observations: Observations, prior: Prior, config: ModelCon
     return lambda u, args: evaluate(u, observations.groups)[0]
 
 
+@eqx.filter_jit
+def _all_predictions(params, groups, config: ModelConfig, geometry):
+    return [predict(params, g, config=config, geometry=geometry)[0] for g in groups]
+
+
 def predictions(params, observations: Observations, config: ModelConfig) -> list[np.ndarray]:
-    """Each group's predicted signal at ``params``, from one compiled program over all groups (the groups are
-    its argument, so another material's data of the same shapes reuses it through the persistent cache);
-    evaluated op by op, each simulation's scan and root solve would compile on its own."""
-    run = jax.jit(
-        lambda p, groups: [predict(p, g, config=config, geometry=observations.geometry)[0] for g in groups]
-    )
-    return [np.asarray(x) for x in run(jax.tree_util.tree_map(jnp.asarray, params), observations.groups)]
+    """Each group's predicted signal at ``params``, from one compiled program over all groups, kept for the
+    process per configuration, geometry and data shapes (the groups are its argument, so another material's data
+    of the same shapes reuses it); evaluated op by op, each simulation's scan and root solve would compile on
+    its own."""
+    params = jax.tree_util.tree_map(jnp.asarray, params)
+    return [np.asarray(x) for x in _all_predictions(params, observations.groups, config, observations.geometry)]
 
 
 def fit_quality(params, observations: Observations, config: ModelConfig, predicted=None) -> dict:
@@ -193,7 +198,7 @@ def residual_correlation(params, observations: Observations, config: ModelConfig
     ``consistent_with_noise``: rho at most :data:`CORRELATION_LIMIT` or within 4 / sqrt(pairs) of 0. A test
     with no two consecutive measured bins has ``lag1`` None and passes. ``params`` must hold the noise scales;
     ``predicted``: each group's prediction at ``params``, if already computed."""
-    predicted = [None] * len(observations.groups) if predicted is None else predicted
+    predicted = predictions(params, observations, config) if predicted is None else predicted
     sums: dict[str, np.ndarray] = {}
     for group, prediction in zip(observations.groups, predicted, strict=True):
         z = whitened_residuals(params, group, config=config, geometry=observations.geometry, predicted=prediction)

@@ -36,6 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..physics import ModelConfig
+from .fit import residual_correlation, structured_lag1
 from .likelihood import (
     OBSERVED,
     SPECIMEN_OFFSET,
@@ -294,6 +295,19 @@ class Posterior:
         other = dataclasses.replace(self, observations=observations)
         object.__setattr__(other, "_compiled", self._compiled)
         return other
+
+    def residual_lag1_at(self, theta) -> dict[str, float]:
+        """test -> lag-1 correlation of each test whose residuals at ``theta`` (D,) fail the structure check
+        (:func:`~peano_bayes.inference.fit.residual_correlation`, :func:`~peano_bayes.inference.fit.structured_lag1`):
+        what :meth:`with_residual_lag1` takes, the rule ``fit`` and the SBC apply at the exact-input mode, after
+        :meth:`with_input_error_at` (the whitening uses the held Jacobian)."""
+        return structured_lag1(residual_correlation(self.params(theta), self.observations, self.config))
+
+    @property
+    def residual_lag1(self) -> dict[str, float]:
+        """test -> the lag-1 correlation its residuals are sampled with (AR(1)); tests with independent bins are
+        absent."""
+        return {g.test: float(g.residual_lag1) for g in self.observations.groups if g.residual_lag1 is not None}
 
     def with_residual_lag1(self, lag1) -> Posterior:
         """This posterior with the residuals of each test in ``lag1`` (test -> lag-1 correlation) taken as AR(1)

@@ -32,7 +32,6 @@ import numpy as np
 from scipy import stats
 
 from ..errors import PeanoBayesInputError
-from ..inference.fit import residual_correlation, structured_lag1
 from ..inference.laplace import NonCentred, posterior_mode, refine_mode
 from ..inference.likelihood import INPUT_ERROR_TESTS, prepare
 from ..inference.posterior import SPECIMEN_SD, Posterior, build_posterior, helmert
@@ -257,8 +256,7 @@ def run_replicate(
     posterior = posterior.with_batch_rows(n_walkers // 2)  # the sampler's batch size: one compilation
     exact = posterior_mode(posterior, start, np.diag(spread**2))
     posterior = posterior.with_input_error_at(exact.mode)  # as peano-bayes fit does, AR(1) residuals included
-    at_mode = residual_correlation(posterior.params(exact.mode), posterior.observations, posterior.config)
-    ar1 = structured_lag1(at_mode)
+    ar1 = posterior.residual_lag1_at(exact.mode)
     posterior = posterior.with_residual_lag1(ar1)
     laplace = refine_mode(posterior.batched, exact, coordinates=NonCentred.of(posterior))
     result = sample(
