@@ -68,6 +68,10 @@ from peano_bayes.validation.sbc import wilson_interval
 pytestmark = pytest.mark.xdist_group("discovery")
 
 QUASI_STATIC = ("load_cycle", "blocking", "stroke")
+# Hysteresis's scored test. The end-to-end discovery runs below fit the load cycles alone: their compiled superset
+# then holds one test's simulator instead of three, which cut these tests' time about sixfold (measured side by
+# side); multi-test data handling is tested on QUASI_STATIC by the unit tests here.
+LOAD_CYCLES = ("load_cycle",)
 DESIGN_EFFECTS = (
     "hysteresis",
     "viscoelastic_relaxation",
@@ -184,10 +188,10 @@ def test_discovery_inputs_share_pressure_within_a_condition_and_keep_each_runs_s
 
 @pytest.fixture(scope="module")
 def hysteresis_data():
-    """A hysteresis case of the small validation below (seed 111): same data shapes, so the discover CLI test
-    and the validation share the superset's compiled programs in this process (another seed's denoiser split
-    a ramp, which changed a shape and cost a second compilation of every program, about 100 s). The strict
-    check of the CLI test (named alone, gap halved) is asserted on it; the validation judges recall over seeds."""
+    """A hysteresis case of the benchmark (seed 111): the same data shapes as the scored runs below, so the
+    discover CLI test and those runs share the superset's compiled programs in this process (another seed's
+    denoiser split a ramp, which changed a shape and cost a second compilation of every program, about 100 s).
+    The CLI test's strict check (named alone, gap halved) is asserted on it."""
     return hidden_dataset(Case(("hysteresis",), 4.0), seed=111)
 
 
@@ -322,7 +326,7 @@ def test_wilson_interval_known_values():
 def test_discover_cli_names_hidden_hysteresis_and_shrinks_the_gap(hysteresis_data, tmp_path, capsys):
     csv = save(hysteresis_data, tmp_path / "hidden")
     out = str(tmp_path / "out")
-    assert main(["discover", str(csv), "--out", out, "--tests", *QUASI_STATIC, "--json"]) == 0
+    assert main(["discover", str(csv), "--out", out, "--tests", *LOAD_CYCLES, "--json"]) == 0
     last = capsys.readouterr().out.strip().splitlines()[-1]
     report = json.loads(last)
     assert report == json.loads((tmp_path / "out" / "report.json").read_text())
@@ -349,32 +353,18 @@ def test_discover_cli_bad_input_exits_2(tmp_path, capsys):
     assert not (tmp_path / "o").exists()
 
 
-@pytest.mark.slow
-def test_hidden_effect_validation_small():
-    """Three seeds per case on the quasi-static tests (hysteresis: seeds 110 and 112; seed 111 is the discover
-    CLI test's dataset, judged strictly there). So few runs cannot prove recall >= 0.7 with a Wilson bound (3 of
-    3 gives a lower bound of 0.44), so this asserts the targets are not contradicted: Wilson upper bound of the
-    recall >= 0.7 (fails at 0 of 2), Wilson lower bound of the false-positive rate <= 0.15 (fails at 2 of 3),
-    drift reported as unexplained or none with Wilson upper bound >= 0.8 (fails at 1 of 3); and the held-out RMSE
-    against the noise-free truth on the load cycle (hysteresis's scored test), after <= 0.5 x before on correct
-    detections. The full validation is experiments/discrepancy_benchmark.py."""
-    cases = [Case(), Case(("hysteresis",), 4.0), Case(drift=True)]
-    seeds = {cases[0]: (110, 111, 112), cases[1]: (110, 112), cases[2]: (110, 111, 112)}
-    rows = []
-    for case in cases:
-        strengths = {e: strength_for_snr(e, case.snr) for e in case.effects}
-        for seed in seeds[case]:
-            rows.append((case, run_case(case, seed, strengths, tests=QUASI_STATIC)))
-    outcomes = {c.label: [r["outcome"] for cc, r in rows if cc == c] for c in cases}
-    hits = sum(r["correct"] for c, r in rows if c == cases[1])
-    assert wilson_interval(hits, 2)[1] >= 0.7, outcomes
-    hysteresis = [r for c, r in rows if c == cases[1]]
-    assert all(r["gap_test"] == "load_cycle" and r["truth_gap"]["hysteresis"]["effective_snr"] > 0 for r in hysteresis)
-    assert all(r["gap_ratio"] <= 0.5 for r in hysteresis if r["correct"]), outcomes
-    false_positives = sum(r["false_positive"] for c, r in rows if c == cases[0])
-    assert wilson_interval(false_positives, 3)[0] <= 0.15, outcomes
-    drift_ok = sum(r["correct"] for c, r in rows if c == cases[2])
-    assert wilson_interval(drift_ok, 3)[1] >= 0.8, outcomes
+def test_benchmark_runs_name_nothing_on_a_null_and_no_physics_for_drift():
+    """Two scored benchmark runs (:func:`run_case`, as the benchmark sends them) on the load cycles, with the
+    discover CLI test's data shapes so they reuse its compiled superset: with nothing hidden (seed 110) the verdict
+    is ``none``; with only load-cell drift hidden (seed 110) no physics effect is named (``none`` or
+    ``unexplained``). These are fixed-seed regression checks of the scoring path; the rates (recall, false
+    positives, with Wilson bounds over 40 seeds per case) are measured by experiments/discrepancy_benchmark.py.
+    The hysteresis case is judged strictly by the discover CLI test."""
+    null = run_case(Case(), 110, {}, tests=LOAD_CYCLES)
+    assert null["verdict"] == "none" and null["correct"] and not null["false_positive"], null["outcome"]
+    drift = run_case(Case(drift=True), 110, {}, tests=LOAD_CYCLES)
+    assert drift["verdict"] in ("none", "unexplained") and not drift["named"], drift["outcome"]
+    assert drift["correct"] and not drift["false_positive"]
 
 
 def test_harness_pressure_noise_follows_the_case():

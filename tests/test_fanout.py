@@ -122,7 +122,8 @@ def test_units_on_a_dask_cluster_survive_a_killed_worker_and_equal_a_serial_run(
     half-written, Dask re-runs the unit on another worker, and it resumes from that chunk. Everything
     completes, and every number equals a serial run with the same seeds in this process: the fit by the
     command line's ``main`` (which then continues with a larger step limit and feeds the main job's report),
-    and the replicate."""
+    and the replicate. The serial runs go first, so the workers read their programs from the persistent
+    compilation cache instead of compiling them again."""
     pytest.importorskip("distributed")
     import arviz as az
 
@@ -133,6 +134,17 @@ def test_units_on_a_dask_cluster_survive_a_killed_worker_and_equal_a_serial_run(
     cluster_out, serial_out = tmp_path / "cluster", tmp_path / "serial"
     state = cluster_out / "TP" / "sampler_state.npz"
     found: dict = {}
+
+    # The serial fit: the command line, uninterrupted. Exit 3: finished unconverged (2 ensembles never certify).
+    # In this process (not a subprocess), so the resumed fit and the report below reuse its traced programs.
+    capsys.readouterr()
+    code = main(_fit_args(data, serial_out, 120))
+    done = capsys.readouterr()
+    assert code == 3, done.out[-2000:] + done.err[-2000:]
+    report = json.loads(done.out)  # --json: stdout holds the JSON object alone, the log goes to stderr
+    assert report["steps"] == 120 and not report["converged"]
+    serial = run_units(_other_units(), None)  # the replicate, in this process
+    assert all(o.ok for o in serial), [o.error for o in serial]
 
     with make_executor("local:2") as (executor, info):
         assert info.kind == "dask-local" and info.workers == 2
@@ -169,14 +181,6 @@ def test_units_on_a_dask_cluster_survive_a_killed_worker_and_equal_a_serial_run(
     assert provenance["units"]["TP"]["worker"] == started[1].rsplit(" ", 1)[1]  # the worker that finished it
     assert provenance["seed"] == 4 and provenance["packages"]["distributed"]
 
-    # The serial fit: the command line, uninterrupted. Exit 3: finished unconverged (2 ensembles never certify).
-    # In this process (not a subprocess), so the resumed fit and the report below reuse its traced programs.
-    capsys.readouterr()
-    code = main(_fit_args(data, serial_out, 120))
-    done = capsys.readouterr()
-    assert code == 3, done.out[-2000:] + done.err[-2000:]
-    report = json.loads(done.out)  # --json: stdout holds the JSON object alone, the log goes to stderr
-    assert report["steps"] == 120 and not report["converged"]
     cluster_draws = az.from_netcdf(cluster_out / "TP" / "posterior.nc").posterior
     serial_draws = az.from_netcdf(serial_out / "TP" / "posterior.nc").posterior
     assert set(cluster_draws.data_vars) == set(serial_draws.data_vars)
@@ -221,8 +225,6 @@ def test_units_on_a_dask_cluster_survive_a_killed_worker_and_equal_a_serial_run(
     assert "| Sarosi static, 12 coefficients |" in index and "| Veale force balance |" in index
     assert all(0.0 < reference[m]["quality"]["rmse"] < 50.0 for m in ("sarosi", "veale"))
 
-    # The replicate, in this process.
-    serial = run_units(_other_units(), None)
-    assert all(o.ok for o in serial), [o.error for o in serial]
+    # The replicate on the cluster equals the one in this process.
     rows = lambda outcomes: [{k: v for k, v in o.value.items() if k != "seconds"} for o in outcomes]  # noqa: E731
     assert rows(found["others"]) == rows(serial)
