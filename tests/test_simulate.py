@@ -195,8 +195,9 @@ def _all_tests(params, config):
     stroke = simulate_stroke(params, Stroke(10 * RAMP, 2e5 * RAMP), config=config)
     step = simulate_step(params, step_protocol(), config=config)
     signals = (cycle.force_n, block.force_n, stroke.strain, step.strain, step.pressure_pa, step.flow_m3_per_s)
-    residuals = {"cycle": cycle.max_residual, "block": block.max_residual, "stroke": stroke.max_residual}
-    residuals["step"] = step.max_residual
+    residuals = dict(
+        cycle=cycle.max_residual, block=block.max_residual, stroke=stroke.max_residual, step=step.max_residual
+    )
     return signals, residuals
 
 
