@@ -268,10 +268,13 @@ def raise_failures(outcomes: Sequence[Outcome], what: str = "work unit") -> None
 
 
 def _one_thread_env() -> dict[str, str]:
-    """:data:`WORKER_ENV`, with the XLA flags appended to any this process already has."""
+    """:data:`WORKER_ENV`, with the XLA flags appended to any this process already has (those it has already
+    are not repeated: JAX's persistent cache keys on the flag list, so a capped process and the workers it
+    starts build programs under one key and read each other's)."""
     env = dict(WORKER_ENV)
-    if os.environ.get("XLA_FLAGS"):
-        env["XLA_FLAGS"] = f"{os.environ['XLA_FLAGS']} {ONE_THREAD_XLA_FLAGS}"
+    present = os.environ.get("XLA_FLAGS", "").split()
+    missing = [flag for flag in ONE_THREAD_XLA_FLAGS.split() if flag not in present]
+    env["XLA_FLAGS"] = " ".join(present + missing)
     return env
 
 

@@ -71,6 +71,21 @@ def test_scheduler_specifications():
         assert executor is None and info.kind == "serial"
 
 
+def test_worker_environment_adds_the_thread_flags_once(monkeypatch):
+    """A worker started by a capped process gets the same XLA flags, not the one-thread flags twice (JAX's
+    persistent cache keys on the flag list: a repeated flag would give the worker's programs other keys)."""
+    from peano_bayes.fanout import ONE_THREAD_XLA_FLAGS, _one_thread_env
+
+    monkeypatch.delenv("XLA_FLAGS", raising=False)
+    assert _one_thread_env()["XLA_FLAGS"] == ONE_THREAD_XLA_FLAGS
+    monkeypatch.setenv("XLA_FLAGS", f"--xla_dump_to=/tmp/x {ONE_THREAD_XLA_FLAGS}")
+    assert _one_thread_env()["XLA_FLAGS"] == f"--xla_dump_to=/tmp/x {ONE_THREAD_XLA_FLAGS}"
+    monkeypatch.setenv("XLA_FLAGS", "--xla_dump_to=/tmp/x")
+    flags = _one_thread_env()["XLA_FLAGS"].split()
+    assert flags == ["--xla_dump_to=/tmp/x", *ONE_THREAD_XLA_FLAGS.split()]
+    assert _one_thread_env()["OMP_NUM_THREADS"] == "1"
+
+
 def test_the_command_line_refuses_a_bad_scheduler_before_anything_runs(tmp_path):
     env = {**os.environ, "PEANO_BAYES_SCHEDULER": "somewhere"}
     out = tmp_path / "r"
@@ -122,9 +137,9 @@ def test_units_on_a_dask_cluster_survive_a_killed_worker_and_equal_a_serial_run(
     half-written, Dask re-runs the unit on another worker, and it resumes from that chunk. Everything
     completes, and every number equals a serial run with the same seeds in this process: the fit by the
     command line's ``main`` (which then continues with a larger step limit and feeds the main job's report),
-    and the replicate. The serial runs go first, their programs then in the persistent compilation cache; the
-    workers' fit does not hit it yet (its log posterior compiles to a slightly different program than the
-    command line's in this process, measured by the cache's entries), so today they compile again."""
+    and the replicate. The serial runs go first, so the workers read their programs from the persistent
+    compilation cache (this process runs with the workers' one-thread XLA flags, conftest.py, which the cache
+    keys on)."""
     pytest.importorskip("distributed")
     import arviz as az
 
