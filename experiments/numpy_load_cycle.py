@@ -45,8 +45,10 @@ def _extension_force(strain, k, rate, l0, width=1e-4):
     return k * l0 * np.where(small, e * (1.0 + 0.5 * x), exponential)
 
 
-def _chain(theta, pressure_pa, x_prev, friction_prev, p, geometry, relaxed):
-    """Chain force [N], shortening [m] and friction [N] at half-angle theta (arrays over the batch)."""
+def _chain(theta, pressure_pa, x_prev, friction_prev, limit_prev, p, geometry, relaxed):
+    """Chain force [N], shortening [m], friction [N] and friction limit [N] at half-angle theta (arrays over the
+    batch). The Dahl step uses the mean of the previous sample's limit and this one's (the limit grows with the
+    pressure load along the step)."""
     n, w, length = geometry
     p_eff = PRESSURE_FLOOR_PA + _smooth_positive(pressure_pa - PRESSURE_FLOOR_PA, 50.0)
     x = n * w * _tube_strain(theta)
@@ -54,18 +56,19 @@ def _chain(theta, pressure_pa, x_prev, friction_prev, p, geometry, relaxed):
     active = p_eff * w * l_e * np.cos(theta) / theta
     stiffness = p["bending_k1_n"] + p["bending_k2_n"] * np.exp(p["bending_exponent"] * np.log(theta))
     force = active - (length / w) * stiffness / _sin_minus_tcos_over_t3(theta)
+    limit_end = p["friction_force_n"] + p["friction_pressure_fraction"] * active
     if relaxed:
         friction = np.zeros_like(force)
     else:
         dx = x - x_prev
-        limit = np.maximum(p["friction_force_n"] + p["friction_pressure_fraction"] * active, 1e-12)
+        limit = np.maximum(0.5 * (limit_prev + limit_end), 1e-12)
         s = np.tanh(dx / DAHL_SMOOTHING_M)
         target = s * limit
         friction = target - (target - friction_prev) * np.exp(-p["friction_stiffness_n_per_m"] * dx * s / limit)
     force = force - friction
     ka, kb = p["tensile_ka_n_per_m"], p["tensile_kb_n_per_m2"]
     stretch = 2.0 * force / (ka + np.sqrt(ka**2 + 4.0 * kb * np.abs(force)))
-    return force, x - stretch, friction
+    return force, x - stretch, friction, limit_end
 
 
 def _solve(residual, shape, newton_steps, z_prev=None):
@@ -104,15 +107,16 @@ def simulate_load_cycle(params, strain, pressure_pa, geometry=(4, 0.015, 0.0495)
     out = np.empty(batch + (len(strain),))
     x_prev = np.zeros(batch)
     friction = np.zeros(batch)
+    limit = np.zeros(batch)
     z = None
     for i, (eps, pr) in enumerate(zip(strain, pressure_pa, strict=True)):
         relaxed = i == 0
 
-        def fn(z, eps=eps, pr=pr, relaxed=relaxed, x_prev=x_prev, friction=friction):
-            return _chain(np.exp(z), pr, x_prev, friction, params, geometry, relaxed)[1] - eps * l0
+        def fn(z, eps=eps, pr=pr, relaxed=relaxed, x_prev=x_prev, friction=friction, limit=limit):
+            return _chain(np.exp(z), pr, x_prev, friction, limit, params, geometry, relaxed)[1] - eps * l0
 
         z = _solve(fn, batch, 4 if relaxed else 3, z_prev=z)
-        force, _, friction = _chain(np.exp(z), pr, x_prev, friction, params, geometry, relaxed)
+        force, _, friction, limit = _chain(np.exp(z), pr, x_prev, friction, limit, params, geometry, relaxed)
         x_prev = n_tubes * w * _tube_strain(np.exp(z))
         out[..., i] = force + _extension_force(eps, params["extension_k_n_per_m"], params["extension_rate"], l0)
     return out
