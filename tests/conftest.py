@@ -6,14 +6,7 @@ import numpy as np
 import pytest
 from hypothesis import settings
 
-from peano_bayes.fanout import cap_threads
-
-# One XLA compute thread per test process, as in the Dask workers that the fan-out tests start: two xdist
-# workers share the two cores, and JAX's persistent cache keys on the XLA flags, so the workers' programs and this
-# process's are then the same entries (set before JAX starts its backend, which the imports below do not do).
-cap_threads()
-
-from peano_bayes.jax_config import enable_compilation_cache  # noqa: E402  (also float64 for every test)
+from peano_bayes.jax_config import enable_compilation_cache  # also float64 for every test
 
 # One persistent compilation cache for the session, both xdist workers and the command-line subprocesses
 # (they read the same place): a program that several tests, workers or processes build identically compiles
