@@ -53,7 +53,14 @@ from peano_bayes.inference import build_posterior, prepare  # noqa: E402
 from peano_bayes.inference.posterior import DEFAULT_HELD  # noqa: E402
 from peano_bayes.jax_config import enable_compilation_cache  # noqa: E402
 from peano_bayes.physics import LoadCycle, simulate_load_cycle  # noqa: E402
-from peano_bayes.pipeline import DEFAULT_MAX_STEPS, DEFAULT_TESTS, infer, prior_of, select_tests  # noqa: E402
+from peano_bayes.pipeline import (  # noqa: E402
+    DEFAULT_MAX_STEPS,
+    DEFAULT_TESTS,
+    _linearisation_point,
+    infer,
+    prior_of,
+    select_tests,
+)
 
 SEED = 0
 
@@ -65,11 +72,9 @@ def sampled_posterior(material: str, fit_dir: Path):
     whole = prior_of(dataset, None)
     config = configured_model(whole.config).config
     posterior = build_posterior(prepare(dataset), whole.for_config(config), config=config, held=DEFAULT_HELD)
-    record = json.loads((fit_dir / "input_error_point.json").read_text())
-    assert record["names"] == list(posterior.names), "the benchmark's posterior is not the one infer sampled"
-    point = np.asarray(record["theta"], dtype=float)
-    posterior = posterior.with_input_error_at(point).with_residual_lag1(record.get("residual_lag1", {}))
-    return posterior, point, config
+    # as a resumed fit reads it back (and refuses a record over other parameters)
+    point, lag1 = _linearisation_point(fit_dir / "input_error_point.json", fit_dir / "sampler_state.npz", posterior)
+    return posterior.with_input_error_at(point).with_residual_lag1(lag1), point, config
 
 
 def numpy_seconds_per_walker(posterior, point, config) -> tuple[float, float, int]:

@@ -138,9 +138,7 @@ def test_units_on_a_dask_cluster_survive_a_killed_worker_and_equal_a_serial_run(
     completes, and every number equals a serial run with the same seeds in this process: the fit by the
     command line's ``main`` (which then continues with a larger step limit and feeds the main job's report),
     and the replicate. The workers compile their programs again: they run with one-thread XLA flags, which
-    JAX's persistent cache keys on, and this process does not (capping the whole suite so that they would
-    share entries cut this test from 196 s to 155 s, but the suite took 770 s instead of 677 s, one fresh-clone
-    run each; the cause of that was not measured)."""
+    JAX's persistent cache keys on, and this process does not."""
     pytest.importorskip("distributed")
     import arviz as az
 
