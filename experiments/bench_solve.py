@@ -1,0 +1,144 @@
+"""Scalar-solve benchmark: the quasi-static simulations of a bundled material's fit, by both warm starts.
+
+Every simulated input row of the material's default tests (load cycles, blocking and stroke, as the likelihood
+prepares them: the model's time grid, not the rig's samples) is simulated for ``--walkers`` parameter sets
+around the generating values of specimen A (log-normal, ``--spread``), vmapped as the sampler's ensemble is.
+Two routes to each time step's bracket (``peano_bayes.physics.simulate.ROOT_PREDICTION``):
+
+- ``previous``: a bracket of +-0.01 around the previous sample's root, bisected to 1e-3 (whole range where
+  it misses), then Newton;
+- ``predicted``: a bracket of +-4.5e-4 around the root extrapolated from the previous two samples, searched
+  outward and bisected only where it misses, then Newton.
+
+Both compile apart (timed, excluded from the rates), both simulate the same rows and parameter sets, and their
+signals are compared before timing (they solve the same equations to the same tolerance). The time per walker
+is the best of ``--repeats`` runs (these machines are noisy). The last line printed is one JSON object.
+
+    python experiments/bench_solve.py [--material TP] [--walkers 152] [--spread 0.02] [--repeats 5]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from peano_bayes.bundled import dataset_path  # noqa: E402
+from peano_bayes.data import load  # noqa: E402
+from peano_bayes.discovery.choice import configured_model  # noqa: E402
+from peano_bayes.inference import prepare  # noqa: E402
+from peano_bayes.inference.likelihood import _simulate  # noqa: E402
+from peano_bayes.jax_config import enable_compilation_cache  # noqa: E402
+from peano_bayes.physics import simulate  # noqa: E402
+from peano_bayes.pipeline import DEFAULT_TESTS, prior_of, select_tests  # noqa: E402
+
+QUASI_STATIC = ("load_cycle", "blocking", "stroke")
+
+
+def workload(material: str):
+    """The quasi-static run groups of ``material``'s prepared default tests, its sampled model configuration,
+    its geometry, and specimen A's generating parameters (name -> value)."""
+    dataset = select_tests(load(dataset_path(material)), DEFAULT_TESTS)
+    config = configured_model(prior_of(dataset, None).config).config
+    observations = prepare(dataset)
+    groups = [g for g in observations.groups if g.test in QUASI_STATIC]
+    truth = json.loads(dataset.provenance["specimen_parameters"])["A"]
+    params = {k: float(v) for k, v in {**config.nominal_parameters(), **truth}.items()}
+    return groups, config, observations.geometry, params
+
+
+def parameter_sets(params: dict, walkers: int, spread: float, seed: int = 0) -> dict:
+    """``walkers`` parameter sets, each value scattered log-normally by ``spread`` around ``params``."""
+    rng = np.random.default_rng(seed)
+    return {k: jnp.asarray(v * np.exp(spread * rng.normal(size=walkers))) for k, v in params.items()}
+
+
+def simulator(groups, config, geometry):
+    """``f(sets) -> list of (walkers, rows, L)`` signals of every group, jitted (traced on first call)."""
+
+    def one_set(params):
+        out = []
+        for g in groups:
+
+            def row(time_s, strain, pressure_pa, load_n, test=g.test):
+                return _simulate(test, params, time_s, strain, pressure_pa, None, load_n, config, geometry)[0]
+
+            inputs = (g.time_s, g.strain, g.pressure_pa, g.load_n)
+            out.append(jax.vmap(row)(*(jnp.asarray(a, dtype=jnp.float64) for a in inputs)))
+        return out
+
+    return jax.jit(jax.vmap(one_set))
+
+
+def timed_route(predicted: bool, groups, config, geometry, sets, repeats: int):
+    """(signals, compile seconds, best seconds per call) of one route."""
+    simulate.ROOT_PREDICTION = predicted
+    try:
+        fn = simulator(groups, config, geometry)
+        start = time.perf_counter()
+        signals = jax.block_until_ready(fn(sets))
+        compile_s = time.perf_counter() - start
+    finally:
+        simulate.ROOT_PREDICTION = True
+    best = np.inf
+    for _ in range(repeats):
+        start = time.perf_counter()
+        jax.block_until_ready(fn(sets))
+        best = min(best, time.perf_counter() - start)
+    return [np.asarray(s) for s in signals], compile_s, best
+
+
+def main(argv=None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--material", default="TP")
+    parser.add_argument("--walkers", type=int, default=152)
+    parser.add_argument("--spread", type=float, default=0.02, help="log-normal scatter of the parameter sets")
+    parser.add_argument("--repeats", type=int, default=5)
+    args = parser.parse_args(argv)
+    enable_compilation_cache()
+
+    groups, config, geometry, params = workload(args.material)
+    sets = parameter_sets(params, args.walkers, args.spread)
+    steps = int(sum(g.time_s.shape[1] - 1 for g in groups))
+    rows = int(sum(g.time_s.shape[0] for g in groups))
+    print(f"{args.material}: {rows} simulated rows in {len(groups)} groups, {steps} scan steps per walker", flush=True)
+    routes = {}
+    for name, predicted in (("previous", False), ("predicted", True)):
+        signals, compile_s, best = timed_route(predicted, groups, config, geometry, sets, args.repeats)
+        routes[name] = {"signals": signals, "compile_s": compile_s, "ms_per_walker": best / args.walkers * 1e3}
+        print(f"{name:9s} {routes[name]['ms_per_walker']:6.2f} ms per walker   (compile {compile_s:.1f} s)", flush=True)
+    difference = {}
+    for g, a, b in zip(groups, routes["previous"]["signals"], routes["predicted"]["signals"], strict=True):
+        # force [N] for load cycles and blocking, strain [-] for the stroke
+        difference[g.test] = max(difference.get(g.test, 0.0), float(np.max(np.abs(a - b))))
+    ratio = routes["previous"]["ms_per_walker"] / routes["predicted"]["ms_per_walker"]
+    print(f"largest signal difference between the routes: {difference}")
+    print(f"predicted / previous speed-up: {ratio:.2f}x")
+    summary = {
+        "benchmark": "solve",
+        "material": args.material,
+        "walkers": args.walkers,
+        "spread": args.spread,
+        "rows": rows,
+        "scan_steps_per_walker": steps,
+        "ms_per_walker": {k: v["ms_per_walker"] for k, v in routes.items()},
+        "compile_s": {k: v["compile_s"] for k, v in routes.items()},
+        "max_signal_difference": difference,
+        "speedup_predicted_vs_previous": ratio,
+        "machine": {"cpus": jax.local_device_count(), "platform": platform.platform(), "jax": jax.__version__},
+    }
+    print(json.dumps(summary))
+    return summary
+
+
+if __name__ == "__main__":
+    main()
