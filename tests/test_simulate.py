@@ -1,13 +1,14 @@
 """The four rig tests: limits, invariants over the parameter box, vmap, and gradients vs finite differences."""
 
 import json
+import math
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from hypothesis import assume, given, settings
+from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 
 from peano_bayes.bundled import dataset_path
@@ -430,6 +431,16 @@ def _smooth(z):
     return jnp.exp(z) - jnp.exp(_STEEP_ROOT)
 
 
+_COLD_SOLVE = {
+    (name, increasing): jax.jit(
+        lambda fn=fn, sign=(1.0 if increasing else -1.0), increasing=increasing: _solve_log_theta(
+            lambda z: sign * fn(z), increasing
+        )
+    )
+    for name, fn in (("steep", _steep), ("smooth", _smooth))
+    for increasing in (True, False)
+}
+
 _PREDICTED_SOLVE = {
     (name, increasing): jax.jit(
         lambda z_pred, fn=fn, sign=(1.0 if increasing else -1.0), increasing=increasing: _solve_log_theta(
@@ -443,24 +454,44 @@ _PREDICTED_SOLVE = {
 
 @settings(max_examples=25, deadline=None)
 @given(offset=st.one_of(st.floats(-3e-3, 3e-3), st.floats(-17.0, 2.0)), increasing=st.booleans())
+@example(offset=0.0, increasing=True)  # the narrow bracket holds the root
+@example(offset=5e-4, increasing=False)  # just outside it
+@example(offset=-0.3, increasing=True)  # far below: the outward search
+@example(offset=-16.0, increasing=False)  # a prediction below the range
+@example(offset=1.5, increasing=True)  # a prediction above the range
+@example(offset=math.nan, increasing=True)  # no prediction at all: the whole range
 def test_the_predicted_bracket_finds_the_root_from_any_prediction(offset, increasing):
     """The scan's solve starts from a root extrapolated from the previous two samples. Wherever that
-    prediction lands (inside the narrow bracket, just outside it, decades away, beyond the range), the outward
-    search and the bisection bracket the root and Newton reaches it: the same root as the whole-range solve."""
+    prediction lands (inside the narrow bracket, just outside it, decades away, beyond the range, or nowhere),
+    the outward search and the bisection bracket the root and Newton reaches it: the root the whole-range solve
+    finds."""
     z_pred = jnp.asarray(_STEEP_ROOT + offset)
     for name in ("steep", "smooth"):
         z = float(_PREDICTED_SOLVE[(name, increasing)](z_pred))
+        cold = float(_COLD_SOLVE[(name, increasing)]())
         assert abs(z - _STEEP_ROOT) < 1e-12, (name, offset, z)
+        assert abs(z - cold) < 1e-12, (name, offset, z, cold)
 
 
-def test_the_predicted_bracket_ends_at_the_range_end_for_a_root_beyond_it():
+def test_the_predicted_bracket_serves_a_batch_of_hits_and_misses():
+    """Under ``vmap`` a batch runs each loop until its last member is done; members done early keep their
+    bracket. Predictions that hit, miss by a little and miss by decades, in one batch, all reach the root."""
+    offsets = jnp.asarray([0.0, 2e-4, -7e-4, 0.05, -3.0, 1.5, -16.0])
+    for (name, increasing), solve in _PREDICTED_SOLVE.items():
+        z = np.asarray(jax.vmap(solve)(_STEEP_ROOT + offsets))
+        np.testing.assert_allclose(z, _STEEP_ROOT, rtol=0, atol=1e-12, err_msg=f"{name} {increasing}")
+
+
+@pytest.mark.parametrize("increasing", [True, False])
+def test_the_predicted_bracket_ends_at_the_range_end_for_a_root_beyond_it(increasing):
     """A root beyond the half-angle range converges to the nearest end, as in the whole-range bisection."""
-    beyond_top = lambda z: z - (_LOG_THETA[1] + 1.0)  # noqa: E731
-    beyond_bottom = lambda z: z - (_LOG_THETA[0] - 1.0)  # noqa: E731
-    for fn, end in ((beyond_top, _LOG_THETA[1]), (beyond_bottom, _LOG_THETA[0])):
+    sign = 1.0 if increasing else -1.0
+    for root, end in ((_LOG_THETA[1] + 1.0, _LOG_THETA[1]), (_LOG_THETA[0] - 1.0, _LOG_THETA[0])):
+        fn = lambda z, root=root: sign * (z - root)  # noqa: E731
+        assert float(_solve_log_theta(fn, increasing)) == pytest.approx(end, abs=1e-12)
         for z_pred in (-0.5, end):
-            assert float(_solve_log_theta(fn, True, z_pred=jnp.asarray(z_pred))) == pytest.approx(end, abs=1e-12)
-            assert float(_solve_log_theta(fn, True)) == pytest.approx(end, abs=1e-12)
+            z = float(_solve_log_theta(fn, increasing, z_pred=jnp.asarray(z_pred)))
+            assert z == pytest.approx(end, abs=1e-12), (root, z_pred)
 
 
 def test_pressure_loaded_friction_converges_in_the_time_step():

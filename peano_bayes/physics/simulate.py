@@ -195,10 +195,12 @@ def _predicted_bracket(residual, increasing: bool, z_pred, atol: float):
     """A bracket ``(lo, hi)`` narrower than ``atol`` that holds the root, found from a predicted root ``z_pred``.
 
     Two residuals at ``z_pred +- 0.45 atol``; where they straddle the root that is the bracket. Where they do not,
-    the missing side is searched outward in steps that grow eightfold from :data:`_LOCAL_HALF_WIDTH` (to the range
-    end, where a root beyond the range converges to the end as in :func:`_bisection`), and the bracket found is
-    bisected to ``atol``. Both searches are while loops, so under ``vmap`` a batch pays for them only at the
-    samples where some member's prediction missed.
+    the missing side is searched outward in steps that grow eightfold from ``2 atol`` (to the range end, where a
+    root beyond the range converges to the end as in :func:`_bisection`), and the bracket found is bisected to
+    ``atol``. Both searches are while loops, so under ``vmap`` a batch pays for them only at the samples where
+    some member's prediction missed. A prediction that is not finite, or residual signs that contradict each
+    other (a residual flat to round-off), start from the whole range; like :func:`_bisection`, each loop stops
+    after :data:`_BISECTION_MAX_STEPS` at most.
     """
     h = _PREDICTED_HALF_WIDTH * atol
     a, b = jnp.clip(z_pred - h, *_LOG_THETA), jnp.clip(z_pred + h, *_LOG_THETA)
@@ -207,37 +209,38 @@ def _predicted_bracket(residual, increasing: bool, z_pred, atol: float):
     hi = jnp.where(~above_a, a, jnp.where(~above_b, b, _LOG_THETA[1]))
     lo_known, hi_known = above_a | (a <= _LOG_THETA[0]), ~above_b | (b >= _LOG_THETA[1])
     # A residual flat to round-off across the pair can give inconsistent signs: fall back to the whole range.
-    muddled = lo > hi
+    muddled = ~(lo <= hi) | ~jnp.isfinite(z_pred)
     lo, hi = jnp.where(muddled, _LOG_THETA[0], lo), jnp.where(muddled, _LOG_THETA[1], hi)
     lo_known, hi_known = lo_known | muddled, hi_known | muddled
 
     def searching(carry):
-        _, _, lo_known, hi_known, _ = carry
-        return ~(lo_known & hi_known)
+        _, _, lo_known, hi_known, _, k = carry
+        return ~(lo_known & hi_known) & (k < _BISECTION_MAX_STEPS)
 
     def search(carry):
-        lo, hi, lo_known, hi_known, step = carry
+        lo, hi, lo_known, hi_known, step, k = carry
         x = jnp.where(lo_known, jnp.minimum(lo + step, _LOG_THETA[1]), jnp.maximum(hi - step, _LOG_THETA[0]))
         above = _root_above(residual, x, increasing)
         at_end = jnp.where(lo_known, x >= _LOG_THETA[1], x <= _LOG_THETA[0])
         lo = jnp.where(above | (at_end & ~lo_known), x, lo)
         hi = jnp.where(~above | (at_end & lo_known), x, hi)
-        return lo, hi, lo_known | above | at_end, hi_known | ~above | at_end, 8.0 * step
+        return lo, hi, lo_known | above | at_end, hi_known | ~above | at_end, 8.0 * step, k + 1
 
-    start = (lo, hi, lo_known, hi_known, jnp.asarray(_SEARCH_FIRST_STEP * atol, dtype=jnp.result_type(lo)))
-    lo, hi, *_ = jax.lax.while_loop(searching, search, start)
+    first_step = jnp.asarray(_SEARCH_FIRST_STEP * atol, dtype=jnp.result_type(lo))
+    lo, hi, *_ = jax.lax.while_loop(searching, search, (lo, hi, lo_known, hi_known, first_step, 0))
 
     def wide(carry):
-        lo, hi = carry
-        return hi - lo >= atol
+        lo, hi, k = carry
+        return (hi - lo >= atol) & (k < _BISECTION_MAX_STEPS)
 
     def halve(carry):
-        lo, hi = carry
+        lo, hi, k = carry
         mid = lo + 0.5 * (hi - lo)
         above = _root_above(residual, mid, increasing)
-        return jnp.where(above, mid, lo), jnp.where(above, hi, mid)
+        return jnp.where(above, mid, lo), jnp.where(above, hi, mid), k + 1
 
-    return jax.lax.while_loop(wide, halve, (lo, hi))
+    lo, hi, _ = jax.lax.while_loop(wide, halve, (lo, hi, 0))
+    return lo, hi
 
 
 def _solve_log_theta(
