@@ -1,5 +1,6 @@
 """The four rig tests: limits, invariants over the parameter box, vmap, and gradients vs finite differences."""
 
+import functools
 import json
 import math
 
@@ -398,32 +399,12 @@ def test_a_mount_on_a_linear_film_is_the_film_at_the_series_stiffness(ka_n_per_m
         np.testing.assert_allclose(np.asarray(mount), np.asarray(film), rtol=0, atol=atol, err_msg=name)
 
 
-@pytest.mark.parametrize("increasing", [True, False])
-def test_the_scalar_solve_converges_where_the_residual_is_nearly_a_step(increasing):
-    """A residual that changes over 1e-7 in log theta (stiff friction at rest changes its force over the
-    sub-micrometre Dahl length): plain Newton from the bisection's 1e-3 bracket overshoots and stops far from
-    the root; the safeguarded steps bisect inside the bracket and reach it. A smooth residual still takes the
-    plain steps and gives the same root."""
-    sign = 1.0 if increasing else -1.0
-    root = -0.7123456
-
-    def steep(z):
-        return sign * (jnp.tanh((z - root) / 1e-7) + 1e-3 * (z - root))
-
-    def smooth(z):
-        return sign * (jnp.exp(z) - jnp.exp(root))
-
-    for fn in (steep, smooth):
-        for z_prev in (None, jnp.asarray(root + 0.004)):
-            z = _solve_log_theta(fn, increasing, z_prev=z_prev)
-            assert abs(float(z) - root) < 1e-12, (fn.__name__, z_prev)
-            assert abs(float(fn(z))) < 1e-6, (fn.__name__, z_prev)
-
-
 _STEEP_ROOT = -0.7123456
 
 
 def _steep(z):
+    """Nearly a step: changes over 1e-7 in log theta, as stiff friction at rest changes its force over the
+    sub-micrometre Dahl length."""
     return jnp.tanh((z - _STEEP_ROOT) / 1e-7) + 1e-3 * (z - _STEEP_ROOT)
 
 
@@ -431,25 +412,36 @@ def _smooth(z):
     return jnp.exp(z) - jnp.exp(_STEEP_ROOT)
 
 
-_COLD_SOLVE = {
-    (name, increasing): jax.jit(
-        lambda fn=fn, sign=(1.0 if increasing else -1.0), increasing=increasing: _solve_log_theta(
-            lambda z: sign * fn(z), increasing
-        )
-    )
-    for name, fn in (("steep", _steep), ("smooth", _smooth))
-    for increasing in (True, False)
+def _oriented(name: str, increasing: bool):
+    """The residual ``name`` rising (``increasing``) or falling with z; its root is ``_STEEP_ROOT``."""
+    fn, sign = {"steep": _steep, "smooth": _smooth}[name], 1.0 if increasing else -1.0
+    return lambda z: sign * fn(z)
+
+
+_CASES = [(name, increasing) for name in ("steep", "smooth") for increasing in (True, False)]
+_PREDICTED_SOLVE = {
+    case: jax.jit(lambda z_pred, case=case: _solve_log_theta(_oriented(*case), case[1], z_pred=z_pred))
+    for case in _CASES
 }
 
-_PREDICTED_SOLVE = {
-    (name, increasing): jax.jit(
-        lambda z_pred, fn=fn, sign=(1.0 if increasing else -1.0), increasing=increasing: _solve_log_theta(
-            lambda z: sign * fn(z), increasing, z_pred=z_pred
-        )
-    )
-    for name, fn in (("steep", _steep), ("smooth", _smooth))
-    for increasing in (True, False)
-}
+
+@functools.cache
+def _cold_root(name: str, increasing: bool) -> float:
+    """The whole-range solve's root of :func:`_oriented` ``(name, increasing)``."""
+    return float(_solve_log_theta(_oriented(name, increasing), increasing))
+
+
+@pytest.mark.parametrize("increasing", [True, False])
+def test_the_scalar_solve_converges_where_the_residual_is_nearly_a_step(increasing):
+    """A residual that is nearly a step (:func:`_steep`): plain Newton from the bisection's 1e-3 bracket
+    overshoots and stops far from the root; the safeguarded steps bisect inside the bracket and reach it. A
+    smooth residual still takes the plain steps and gives the same root."""
+    for name in ("steep", "smooth"):
+        fn = _oriented(name, increasing)
+        for z_prev in (None, jnp.asarray(_STEEP_ROOT + 0.004)):
+            z = _solve_log_theta(fn, increasing, z_prev=z_prev)
+            assert abs(float(z) - _STEEP_ROOT) < 1e-12, (name, z_prev)
+            assert abs(float(fn(z))) < 1e-6, (name, z_prev)
 
 
 @settings(max_examples=25, deadline=None)
@@ -468,7 +460,7 @@ def test_the_predicted_bracket_finds_the_root_from_any_prediction(offset, increa
     z_pred = jnp.asarray(_STEEP_ROOT + offset)
     for name in ("steep", "smooth"):
         z = float(_PREDICTED_SOLVE[(name, increasing)](z_pred))
-        cold = float(_COLD_SOLVE[(name, increasing)]())
+        cold = _cold_root(name, increasing)
         assert abs(z - _STEEP_ROOT) < 1e-12, (name, offset, z)
         assert abs(z - cold) < 1e-12, (name, offset, z, cold)
 

@@ -159,36 +159,42 @@ def _newton_steps(fn, z, iterations: int, lo, hi, increasing: bool):
     return jax.lax.while_loop(unfinished, newton, start)[0]
 
 
-def _bisection(residual, atol: float, increasing: bool, lower=_LOG_THETA[0], upper=_LOG_THETA[1]):
-    """Bracketed bisection over ``[lower, upper]`` in log(theta), by default the whole range; the midpoint of
-    the last interval, once it is narrower than ``atol`` (at most ``_BISECTION_MAX_STEPS`` halvings).
-
-    The orientation is known (no detection), so a root beyond the range converges to its nearest end:
-    an ideal muscle with no bending reaches its free strain only at theta = pi/2. Only the residual's sign is
-    read, so no tangent flows through the loop. The first step always evaluates the midpoint (an empty
-    interval costs one residual), as optimistix's ``Bisection`` does; this is a ``lax.while_loop`` of our own
-    rather than ``optimistix.root_find`` because the latter's implicit-function rule is traced under every
-    derivative of the simulation and puts a host callback (a runtime check) into the program, which bars it
-    from the persistent compilation cache and costs seconds of tracing per simulation.
-    """
-    lower, upper = jnp.asarray(lower), jnp.asarray(upper)
-
-    def unfinished(carry):
-        lo, hi, _, k = carry
-        return ((k == 0) | (jnp.abs(hi - lo) >= atol)) & (k < _BISECTION_MAX_STEPS)
-
-    def halve(carry):
-        lo, hi, z, k = carry
-        root_above = (residual(z) < 0.0) == increasing
-        lo, hi = jnp.where(root_above, z, lo), jnp.where(root_above, hi, z)
-        return lo, hi, lo + 0.5 * (hi - lo), k + 1
-
-    return jax.lax.while_loop(unfinished, halve, (lower, upper, 0.5 * (lower + upper), 0))[2]
-
-
 def _root_above(residual, z, increasing: bool):
     """Whether the root of the monotone ``residual`` lies above ``z`` (read from the residual's sign)."""
     return (residual(z) < 0.0) == increasing
+
+
+def _bisect(residual, lo, hi, atol: float, increasing: bool):
+    """``(lo, hi)`` halved until narrower than ``atol`` (at most ``_BISECTION_MAX_STEPS`` halvings), keeping
+    the root inside; an interval already narrower costs nothing (under ``vmap``, only the members that need
+    halving make the batch loop). Only the residual's sign is read, so no tangent flows through the loop."""
+
+    def wide(carry):
+        lo, hi, k = carry
+        return (hi - lo >= atol) & (k < _BISECTION_MAX_STEPS)
+
+    def halve(carry):
+        lo, hi, k = carry
+        mid = lo + 0.5 * (hi - lo)
+        above = _root_above(residual, mid, increasing)
+        return jnp.where(above, mid, lo), jnp.where(above, hi, mid), k + 1
+
+    lo, hi, _ = jax.lax.while_loop(wide, halve, (jnp.asarray(lo), jnp.asarray(hi), 0))
+    return lo, hi
+
+
+def _bisection(residual, atol: float, increasing: bool, lower=_LOG_THETA[0], upper=_LOG_THETA[1]):
+    """Bracketed bisection over ``[lower, upper]`` in log(theta), by default the whole range; the midpoint of
+    the last interval, once it is narrower than ``atol`` (:func:`_bisect`).
+
+    The orientation is known (no detection), so a root beyond the range converges to its nearest end:
+    an ideal muscle with no bending reaches its free strain only at theta = pi/2. This is a ``lax.while_loop``
+    of our own rather than ``optimistix.root_find`` because the latter's implicit-function rule is traced under
+    every derivative of the simulation and puts a host callback (a runtime check) into the program, which bars
+    it from the persistent compilation cache and costs seconds of tracing per simulation.
+    """
+    lo, hi = _bisect(residual, lower, upper, atol, increasing)
+    return lo + 0.5 * (hi - lo)
 
 
 def _predicted_bracket(residual, increasing: bool, z_pred, atol: float):
@@ -228,19 +234,7 @@ def _predicted_bracket(residual, increasing: bool, z_pred, atol: float):
 
     first_step = jnp.asarray(_SEARCH_FIRST_STEP * atol, dtype=jnp.result_type(lo))
     lo, hi, *_ = jax.lax.while_loop(searching, search, (lo, hi, lo_known, hi_known, first_step, 0))
-
-    def wide(carry):
-        lo, hi, k = carry
-        return (hi - lo >= atol) & (k < _BISECTION_MAX_STEPS)
-
-    def halve(carry):
-        lo, hi, k = carry
-        mid = lo + 0.5 * (hi - lo)
-        above = _root_above(residual, mid, increasing)
-        return jnp.where(above, mid, lo), jnp.where(above, hi, mid), k + 1
-
-    lo, hi, _ = jax.lax.while_loop(wide, halve, (lo, hi, 0))
-    return lo, hi
+    return _bisect(residual, lo, hi, atol, increasing)
 
 
 def _solve_log_theta(
