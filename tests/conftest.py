@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 from hypothesis import settings
 
-from peano_bayes.jax_config import enable_compilation_cache  # also float64 for every test
+from peano_bayes.fanout import cap_threads
+
+# One compute thread per process, set before JAX starts its backend: the suite runs as two xdist workers on two
+# cores, and the Dask workers, notebook kernels and command-line subprocesses that tests start inherit the same
+# XLA flags, which JAX's persistent cache keys on, so they read the programs this process compiled.
+cap_threads()
+
+from peano_bayes.jax_config import enable_compilation_cache  # noqa: E402  (also float64 for every test)
 
 # One persistent compilation cache for the session, both xdist workers and the command-line subprocesses
 # (they read the same place): a program that several tests, workers or processes build identically compiles

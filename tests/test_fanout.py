@@ -137,8 +137,9 @@ def test_units_on_a_dask_cluster_survive_a_killed_worker_and_equal_a_serial_run(
     half-written, Dask re-runs the unit on another worker, and it resumes from that chunk. Everything
     completes, and every number equals a serial run with the same seeds in this process: the fit by the
     command line's ``main`` (which then continues with a larger step limit and feeds the main job's report),
-    and the replicate. The workers compile their programs again: they run with one-thread XLA flags, which
-    JAX's persistent cache keys on, and this process does not."""
+    and the replicate. The workers read the programs the serial run compiled from the persistent cache: the
+    suite's processes run with the workers' one-thread XLA flags (``tests/conftest.py``), which the cache keys
+    on."""
     pytest.importorskip("distributed")
     import arviz as az
 
