@@ -236,6 +236,7 @@ def infer(
     chunk: int = DEFAULT_CHUNK,
     max_steps: int = DEFAULT_MAX_STEPS,
     warmup: int = DEFAULT_WARMUP,
+    min_steps: int = 0,
     progress: bool = True,
     sample_all: bool = False,
     prior: str | Path | None = None,
@@ -255,7 +256,7 @@ def infer(
     (default :data:`DEFAULT_TESTS`). The least-squares point is polished to the posterior mode, first with the
     driving inputs taken as exact (:func:`~peano_bayes.inference.laplace.posterior_mode`), then on the full
     likelihood (:func:`~peano_bayes.inference.laplace.refine_mode`); sampling runs ``warmup`` steps of warm-up, then
-    chunks of at most ``chunk`` steps until converged or ``max_steps`` (see
+    chunks of at most ``chunk`` steps until converged or ``max_steps``, and at least ``min_steps`` in all (see
     :func:`~peano_bayes.inference.sample.sample`). ``resume`` continues an interrupted run.
     ``sample_all`` also samples the shape constants held by default
     (:data:`~peano_bayes.inference.posterior.DEFAULT_HELD`). ``discover``: first run discovery on the data
@@ -365,6 +366,7 @@ def infer(
         chunk=chunk,
         max_steps=max_steps,
         warmup=warmup,
+        min_steps=min_steps,
         state_path=state_path,
         resume=resume,
         progress=progress,

@@ -61,6 +61,20 @@ def test_converges_on_a_gaussian_and_recovers_its_moments():
     np.testing.assert_allclose(np.cov(draws.T), g.cov, atol=0.1)
 
 
+def test_a_converged_run_goes_on_to_min_steps_and_begins_as_the_shorter_run():
+    """``min_steps`` lengthens a run the rule has certified, in chunks, to exactly ``min_steps``; the seeds are
+    the same, so its first steps are the shorter run's, bit for bit."""
+    g = Gaussian()
+    kw = dict(n_walkers=16, seed=3, chunk=400, warmup=100, max_steps=20_000, progress=False, log=lambda m: None)
+    short = sample(g, g.mean + 0.1, 0.01 * np.eye(3), **kw)
+    assert short.convergence.converged
+    steps = short.chain.shape[0]
+    longer = sample(g, g.mean + 0.1, 0.01 * np.eye(3), min_steps=steps + 450, **kw)
+    assert longer.chain.shape[0] == steps + 450 and longer.convergence.converged
+    assert [c["steps"] for c in longer.chunks][-2:] == [steps + 400, steps + 450]
+    np.testing.assert_array_equal(longer.chain[:steps], short.chain)
+
+
 def test_independence_move_alone_samples_the_target_despite_a_wrong_proposal():
     """The Hastings factor is right: an MH chain whose only move is a proposal centred off the target and
     with the wrong shape still has the target's mean and covariance (a sign error would bias both)."""

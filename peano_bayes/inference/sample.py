@@ -396,6 +396,7 @@ def sample(
     chunk: int = DEFAULT_CHUNK,
     max_steps: int = DEFAULT_MAX_STEPS,
     warmup: int = DEFAULT_WARMUP,
+    min_steps: int = 0,
     state_path: str | os.PathLike | None = None,
     resume: bool = False,
     progress: bool = True,
@@ -406,7 +407,8 @@ def sample(
     from its own draws of N(``centre``, :data:`START_INFLATION`^2 ``covariance``) in theta space (overdispersed,
     so that R-hat can reveal an ensemble stuck in its start): ``warmup`` steps of warm-up, then chunks of at
     most ``chunk`` steps (:func:`planned_chunk`) until converged (:func:`convergence`) or ``max_steps`` in all
-    (see the module docstring).
+    (see the module docstring); a converged run shorter than ``min_steps`` goes on, in chunks of at most
+    ``chunk``, to ``min_steps`` exactly (a reference run longer than the convergence rule needs).
     ``n_walkers``: see :func:`walker_count`. ``log(message)`` reports each round and chunk. ``coordinates``
     (default theta itself, :class:`~peano_bayes.inference.coordinates.Identity`): what the ensembles move (see
     :mod:`~peano_bayes.inference.coordinates`); the state file holds those, while the result's chain, log
@@ -473,12 +475,16 @@ def sample(
         in_warmup = done < warmup
         if result is None and done > warmup:  # resumed after a chunk: plan the next one as the run would have
             result = convergence(as_theta(chain)[0], posterior.names, start=warmup, n_ensembles=n_ensembles)
-            if result.converged:
+            if result.converged and done >= min_steps:
                 break
         if in_warmup:
             n = next(b for b in bounds if b > done) - done
+        elif result is None:
+            n = chunk
+        elif result.converged:  # lengthened to min_steps
+            n = min(chunk, min_steps - done)
         else:
-            n = chunk if result is None else planned_chunk(result, done, warmup, chunk)
+            n = planned_chunk(result, done, warmup, chunk)
         n = min(n, max_steps - done)
         t0 = time.perf_counter()
         label = "warm-up" if in_warmup else "steps"
@@ -521,7 +527,7 @@ def sample(
             f"min bulk ESS {np.min(result.ess_bulk):.0f}, min tail ESS {np.min(result.ess_tail):.0f}"
             + ("" if result.converged else " (not yet converged)")
         )
-        if result.converged:
+        if result.converged and chain.shape[0] >= min_steps:
             break
     theta_chain, log_jacobian = as_theta(chain)
     if result is None and chain.shape[0] > warmup:  # resumed at or past the limit: the saved chain as it is
