@@ -827,8 +827,11 @@ def test_the_stroke_inputs_error_is_estimated_from_the_fitted_runs_as_the_infere
     flat = _pointwise(jax.numpy.asarray(x), split.fit)
     (group,), (sd,) = split.fit.groups, split.fit.sd
     columns = np.asarray(group.pressure_error)  # (r, q, L), one column set shared by the condition
+    # The plain prediction (n_error_sets=0: no input-error Jacobian), an independent route to the derivative.
     predicted = lambda pressure: np.asarray(  # noqa: E731
-        predictions(jax.numpy.asarray(x), replace(split.fit, groups=(replace(group, pressure_pa=pressure),)))[0][0]
+        predictions(
+            jax.numpy.asarray(x), replace(split.fit, n_error_sets=0, groups=(replace(group, pressure_pa=pressure),))
+        )[0][0]
     )
     at_fit = predicted(group.pressure_pa)
     h = 1e-2
@@ -859,7 +862,9 @@ def test_the_stroke_inputs_error_is_estimated_from_the_fitted_runs_as_the_infere
     held_columns = np.asarray(held.pressure_error)
     np.testing.assert_allclose(held_columns, columns[: held_columns.shape[0]], rtol=0, atol=0)
     held_at = lambda pressure: np.asarray(  # noqa: E731
-        predictions(jax.numpy.asarray(x), replace(split.held_out, groups=(replace(held, pressure_pa=pressure),)))[0][0]
+        predictions(
+            jax.numpy.asarray(x), replace(split.held_out, n_error_sets=0, groups=(replace(held, pressure_pa=pressure),))
+        )[0][0]
     )
     held_jac = np.stack(
         [(held_at(held.pressure_pa + h * c) - held_at(held.pressure_pa - h * c))[0] / (2 * h) for c in held_columns[0]]
