@@ -75,6 +75,36 @@ def test_a_converged_run_goes_on_to_min_steps_and_begins_as_the_shorter_run():
     np.testing.assert_array_equal(longer.chain[:steps], short.chain)
 
 
+def test_a_lengthened_run_resumes_to_the_same_chain_and_min_steps_cannot_exceed_the_limit(tmp_path):
+    """Stopped part way through the lengthening (a step limit below ``min_steps`` is refused, so stop by a
+    smaller ``min_steps`` with the same limit) and resumed, the run is the uninterrupted one, bit for bit."""
+    g = Gaussian()
+    kw = dict(n_walkers=16, seed=3, chunk=400, warmup=100, progress=False, log=lambda m: None)
+    short = sample(g, g.mean + 0.1, 0.01 * np.eye(3), max_steps=20_000, **kw)
+    steps = short.chain.shape[0]
+    whole = sample(g, g.mean + 0.1, 0.01 * np.eye(3), max_steps=steps + 450, min_steps=steps + 450, **kw)
+    state = tmp_path / "state.npz"
+    first = sample(
+        g, g.mean + 0.1, 0.01 * np.eye(3), max_steps=steps + 200, min_steps=steps + 200, state_path=state, **kw
+    )
+    assert first.chain.shape[0] == steps + 200
+    rest = sample(
+        g,
+        g.mean + 0.1,
+        0.01 * np.eye(3),
+        max_steps=steps + 450,
+        min_steps=steps + 450,
+        state_path=state,
+        resume=True,
+        **kw,
+    )
+    np.testing.assert_array_equal(rest.chain, whole.chain)
+    with pytest.raises(PeanoBayesInputError, match=r"min_steps \(500\) exceeds max_steps \(400\)"):
+        sample(g, g.mean, 0.05 * np.eye(3), max_steps=400, min_steps=500, **kw)
+    with pytest.raises(PeanoBayesInputError, match="chunk must be >= 1"):
+        sample(g, g.mean, 0.05 * np.eye(3), **{**kw, "chunk": 0})
+
+
 def test_independence_move_alone_samples_the_target_despite_a_wrong_proposal():
     """The Hastings factor is right: an MH chain whose only move is a proposal centred off the target and
     with the wrong shape still has the target's mean and covariance (a sign error would bias both)."""

@@ -414,6 +414,10 @@ def sample(
     :mod:`~peano_bayes.inference.coordinates`); the state file holds those, while the result's chain, log
     posterior and convergence figures are in theta."""
     start_time = time.perf_counter()
+    if chunk < 1:
+        raise PeanoBayesInputError(f"chunk must be >= 1 step, got {chunk}")
+    if min_steps > max_steps:
+        raise PeanoBayesInputError(f"min_steps ({min_steps}) exceeds max_steps ({max_steps}); raise max_steps")
     coordinates = Identity() if coordinates is None else coordinates
 
     def density(z):
@@ -479,12 +483,10 @@ def sample(
                 break
         if in_warmup:
             n = next(b for b in bounds if b > done) - done
-        elif result is None:
-            n = chunk
-        elif result.converged:  # lengthened to min_steps
-            n = min(chunk, min_steps - done)
         else:
-            n = planned_chunk(result, done, warmup, chunk)
+            n = chunk if result is None or result.converged else planned_chunk(result, done, warmup, chunk)
+            if done < min_steps:  # a run lengthened to min_steps ends there exactly, converged on the way or not
+                n = min(n, min_steps - done)
         n = min(n, max_steps - done)
         t0 = time.perf_counter()
         label = "warm-up" if in_warmup else "steps"
