@@ -5,8 +5,15 @@ Reads a certified result (a converged ``peano-bayes fit`` or ``run`` folder of a
 ensembles and tests, and exactly ``--factor`` times as many steps (``infer(min_steps=...)``: the rule may not
 stop it early), then compares every sampled quantity of the two ``posterior.nc`` files (population values,
 specimen values and contrasts, a new specimen, the spread, the noise scales): the certified run's mean and its
-94 % interval ends (3 % and 97 % quantiles), each in units of the reference's sd. The main-job issue's rule for
-"the same posterior" is means within 0.1 sd and interval ends within 0.2 sd.
+94 % interval ends (3 % and 97 % quantiles, equal-tailed, where ``summary.json`` reports HDIs), each in units of
+the reference's sd. The main-job issue's rule for "the same posterior" is means within 0.1 sd and interval ends
+within 0.2 sd. Each difference is also given in units of its Monte Carlo standard error (both runs' arviz MCSE,
+each ensemble's walkers pooled into one chain as the convergence rule pools them): at the rule's ESS of 1000 an
+interval end's own error is about 0.09 sd, so a difference beyond 0.2 sd that is within 3 MCSE is noise, not a
+wrong posterior.
+
+The reference fits the dataset, prior and model the certified run recorded; a certified run made with discovery,
+or whose sampled parameters the reference does not share, is refused.
 
 The reference run saves its state after every chunk: run the same command again to continue it.
 
@@ -27,6 +34,7 @@ import numpy as np
 
 from peano_bayes import enable_compilation_cache
 from peano_bayes.bundled import dataset_path
+from peano_bayes.inference.sample import pooled
 from peano_bayes.pipeline import infer
 
 #: The rule for "the same posterior", in units of the reference's sd.
@@ -35,45 +43,83 @@ MAX_MEAN_SD, MAX_END_SD = 0.1, 0.2
 QUANTILES = (0.03, 0.97)
 
 
-def draws_by_quantity(path: Path) -> dict[str, np.ndarray]:
-    """(n_draws,) draws of every scalar quantity of ``posterior.nc``'s posterior group; a quantity with more
-    dimensions than chain and draw (a per-specimen value) gives one entry per element, ``name[i]``."""
+def draws_by_quantity(path: Path, n_ensembles: int) -> dict[str, np.ndarray]:
+    """(n_ensembles, n) draws of every scalar quantity of ``posterior.nc``'s posterior group, each ensemble's
+    walkers (the file's chains, ensemble by ensemble) laid end to end; a quantity with more dimensions than
+    chain and draw (a per-specimen value) gives one entry per element, ``name[i]``."""
     posterior = az.from_netcdf(path).posterior
     out = {}
     for name, var in posterior.data_vars.items():
-        values = np.asarray(var).reshape(var.shape[0] * var.shape[1], -1)
-        if values.shape[1] == 1:
-            out[name] = values[:, 0]
+        values = np.asarray(var, dtype=float).reshape(var.shape[0], var.shape[1], -1)  # (walkers, draws, k)
+        chains = pooled(np.moveaxis(values, 0, 1), n_ensembles)  # (ensembles, walkers * draws, k)
+        if chains.shape[-1] == 1:
+            out[name] = chains[..., 0]
         else:
-            out.update({f"{name}[{i}]": values[:, i] for i in range(values.shape[1])})
+            out.update({f"{name}[{i}]": chains[..., i] for i in range(chains.shape[-1])})
     return out
 
 
 def agreement(certified: dict[str, np.ndarray], reference: dict[str, np.ndarray]) -> dict:
-    """Per quantity present in both: |mean difference| and the larger |interval-end difference|, in the
-    reference's sd; the largest of each with its quantity, and whether both are within the rule."""
+    """Per quantity: |mean difference| and the larger |interval-end difference|, in the reference's sd and in
+    their Monte Carlo standard errors (``*_mcse``: the difference over the root sum of both runs' MCSE); the
+    largest of each with its quantity, and whether the largest in sd are within the rule. Both runs must hold
+    the same quantities; a constant one (a held value) is skipped."""
+    if set(certified) != set(reference):
+        raise SystemExit(
+            "the two posteriors hold different quantities: only certified "
+            f"{sorted(set(certified) - set(reference))}, only reference {sorted(set(reference) - set(certified))}"
+        )
     rows = {}
-    for name in sorted(set(certified) & set(reference)):
+    for name in sorted(certified):
         ours, ref = certified[name], reference[name]
         sd = float(np.std(ref))
-        if not np.isfinite(sd) or sd == 0.0:
-            continue  # a constant (a held value): nothing to compare
-        mean = abs(float(np.mean(ours) - np.mean(ref))) / sd
-        ends = float(np.max(np.abs(np.quantile(ours, QUANTILES) - np.quantile(ref, QUANTILES)))) / sd
-        rows[name] = {"mean_sd": mean, "interval_end_sd": ends}
-    worst_mean = max(rows, key=lambda n: rows[n]["mean_sd"])
-    worst_end = max(rows, key=lambda n: rows[n]["interval_end_sd"])
+        if not np.isfinite(sd) or not np.all(np.isfinite(ours)):
+            raise SystemExit(f"{name}: non-finite draws")
+        if sd == 0.0:
+            continue
+        mean_se = np.hypot(az.mcse(ours, method="mean"), az.mcse(ref, method="mean"))
+        mean = abs(float(np.mean(ours) - np.mean(ref)))
+        ends, ends_z = [], []
+        for q in QUANTILES:
+            se = np.hypot(az.mcse(ours, method="quantile", prob=q), az.mcse(ref, method="quantile", prob=q))
+            d = abs(float(np.quantile(ours, q) - np.quantile(ref, q)))
+            ends.append(d / sd)
+            ends_z.append(d / se)
+        rows[name] = {
+            "mean_sd": mean / sd,
+            "mean_mcse": float(mean / mean_se),
+            "interval_end_sd": max(ends),
+            "interval_end_mcse": float(max(ends_z)),
+        }
+    if not rows:
+        raise SystemExit("no quantity varies in the reference: nothing to compare")
+    worst = {key: max(rows, key=lambda n: rows[n][key]) for key in next(iter(rows.values()))}
     return {
         "quantities": len(rows),
-        "max_mean_difference_sd": rows[worst_mean]["mean_sd"],
-        "worst_mean": worst_mean,
-        "max_interval_end_difference_sd": rows[worst_end]["interval_end_sd"],
-        "worst_interval_end": worst_end,
+        "max_mean_difference_sd": rows[worst["mean_sd"]]["mean_sd"],
+        "worst_mean": worst["mean_sd"],
+        "max_interval_end_difference_sd": rows[worst["interval_end_sd"]]["interval_end_sd"],
+        "worst_interval_end": worst["interval_end_sd"],
+        "max_mean_difference_mcse": rows[worst["mean_mcse"]]["mean_mcse"],
+        "max_interval_end_difference_mcse": rows[worst["interval_end_mcse"]]["interval_end_mcse"],
         "same_posterior": bool(
-            rows[worst_mean]["mean_sd"] <= MAX_MEAN_SD and rows[worst_end]["interval_end_sd"] <= MAX_END_SD
+            rows[worst["mean_sd"]]["mean_sd"] <= MAX_MEAN_SD
+            and rows[worst["interval_end_sd"]]["interval_end_sd"] <= MAX_END_SD
         ),
         "rows": rows,
     }
+
+
+def certified_dataset(summary: dict) -> Path:
+    """The dataset the certified run fitted: the recorded path, or, when that file is gone (a run from a
+    temporary clone), the bundled file of the same name."""
+    recorded = Path(summary["dataset"])
+    if recorded.exists():
+        return recorded
+    bundled = dataset_path(summary["material"])
+    if recorded.name != bundled.name or recorded.parent.parts[-2:] != ("bundled", "data"):
+        raise SystemExit(f"{recorded}: the certified run's dataset is gone and is not a bundled file")
+    return bundled
 
 
 def main() -> None:
@@ -88,23 +134,37 @@ def main() -> None:
         sys.exit(f"{args.certified}: the run is not converged; the comparison needs a certified run")
     if args.seed == summary["seed"]:
         sys.exit(f"--seed {args.seed} is the certified run's own seed; the reference needs another")
+    if args.factor < 2:
+        sys.exit(f"--factor must be >= 2, got {args.factor}")
+    if summary["model"].get("discovery") is not None:
+        sys.exit(f"{args.certified}: a run with discovery; fit its chosen model by hand (--model) and compare that")
     material, steps = summary["material"], int(summary["steps"])
     length = args.factor * steps
+    settings = dict(
+        seed=args.seed,
+        tests=summary["tests"],
+        n_walkers=summary["n_walkers"],
+        n_ensembles=summary["n_ensembles"],
+        sampler_coordinates=summary["sampler_coordinates"],
+    )
     enable_compilation_cache()
 
     label = f"{material}_reference"
     folder = args.out / label
     done = folder / "summary.json"
     previous = json.loads(done.read_text()) if done.exists() else None
-    if previous is None or previous["steps"] < length:
+    if previous is not None and (previous["steps"] != length or any(previous[k] != v for k, v in settings.items())):
+        sys.exit(f"{done}: a reference of other settings or length; move it away or choose another --out")
+    if previous is None:
         reference = infer(
-            dataset_path(material),
+            certified_dataset(summary),
             args.out,
             label=label,
             seed=args.seed,
             tests=summary["tests"],
             n_walkers=summary["n_walkers"],
             n_ensembles=summary["n_ensembles"],
+            coordinates=summary["sampler_coordinates"]["kind"],
             min_steps=length,
             max_steps=length,
             resume=(folder / "sampler_state.npz").exists(),
@@ -114,8 +174,13 @@ def main() -> None:
         )
     else:
         reference = previous
+    for key in ("model", "prior"):
+        if reference[key] != summary[key]:
+            sys.exit(f"the reference's {key} differs from the certified run's: {reference[key]} against {summary[key]}")
+    n_ensembles = summary["n_ensembles"]
     same = agreement(
-        draws_by_quantity(args.certified / "posterior.nc"), draws_by_quantity(folder / "posterior.nc")
+        draws_by_quantity(args.certified / "posterior.nc", n_ensembles),
+        draws_by_quantity(folder / "posterior.nc", n_ensembles),
     )
     conv = reference["convergence"]
     print(f"certified: {material}, {steps} steps, seed {summary['seed']}")
@@ -128,6 +193,11 @@ def main() -> None:
         f"({same['worst_mean']}), 94 % interval ends within {same['max_interval_end_difference_sd']:.3f} sd "
         f"({same['worst_interval_end']}); rule {MAX_MEAN_SD} / {MAX_END_SD} sd: "
         + ("the same posterior" if same["same_posterior"] else "NOT the same posterior")
+        + ("" if conv["converged"] else " (the reference itself did not pass the convergence gates)")
+    )
+    print(
+        f"in Monte Carlo standard errors: means within {same['max_mean_difference_mcse']:.1f}, interval ends "
+        f"within {same['max_interval_end_difference_mcse']:.1f}"
     )
     rows = same.pop("rows")
     print(
