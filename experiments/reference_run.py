@@ -129,24 +129,25 @@ def main() -> None:
     parser.add_argument("--factor", type=int, default=4, help="reference length over the certified run's")
     parser.add_argument("--seed", type=int, default=1, help="the reference's seed (not the certified run's)")
     args = parser.parse_args()
+    if not (args.certified / "summary.json").is_file() or not (args.certified / "posterior.nc").is_file():
+        parser.error(f"{args.certified}: expected a result folder with summary.json and posterior.nc")
     summary = json.loads((args.certified / "summary.json").read_text())
     if not summary["convergence"]["converged"]:
-        sys.exit(f"{args.certified}: the run is not converged; the comparison needs a certified run")
+        parser.error(f"{args.certified}: the run is not converged; the comparison needs a certified run")
     if args.seed == summary["seed"]:
-        sys.exit(f"--seed {args.seed} is the certified run's own seed; the reference needs another")
+        parser.error(f"--seed {args.seed} is the certified run's own seed; the reference needs another")
     if args.factor < 2:
-        sys.exit(f"--factor must be >= 2, got {args.factor}")
+        parser.error(f"--factor must be >= 2, got {args.factor}")
     if summary["model"].get("discovery") is not None:
-        sys.exit(f"{args.certified}: a run with discovery; fit its chosen model by hand (--model) and compare that")
+        parser.error(
+            f"{args.certified}: a run with discovery: its model comes from discovery's report, which the reference "
+            "would not repeat; compare a run without --discover"
+        )
     material, steps = summary["material"], int(summary["steps"])
     length = args.factor * steps
-    settings = dict(
-        seed=args.seed,
-        tests=summary["tests"],
-        n_walkers=summary["n_walkers"],
-        n_ensembles=summary["n_ensembles"],
-        sampler_coordinates=summary["sampler_coordinates"],
-    )
+    # The reference's settings, as its summary.json records them: the certified run's, with its own seed.
+    sampling = dict(seed=args.seed, **{k: summary[k] for k in ("tests", "n_walkers", "n_ensembles")})
+    settings = dict(sampling, sampler_coordinates=summary["sampler_coordinates"])
     enable_compilation_cache()
 
     label = f"{material}_reference"
@@ -160,10 +161,7 @@ def main() -> None:
             certified_dataset(summary),
             args.out,
             label=label,
-            seed=args.seed,
-            tests=summary["tests"],
-            n_walkers=summary["n_walkers"],
-            n_ensembles=summary["n_ensembles"],
+            **sampling,
             coordinates=summary["sampler_coordinates"]["kind"],
             min_steps=length,
             max_steps=length,
