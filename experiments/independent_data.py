@@ -12,8 +12,20 @@ truth. Our prediction is the 94 % interval for a **new specimen**: the posterior
 spread (``parameter_draws(level="new_specimen")``), each pushed through the relaxed muscle's static force at
 zero strain and static strain at zero force. A check passes when the truth lies inside the interval.
 
-Pre-registered (before the first run): seed 0, material conditions of FC (200 kPa, 40 N start tension), the
-default engine and tests, 200 draws, fractions 0.25 0.5 0.75 1.0; pass = every check inside.
+**Model discrepancy.** Where the model cannot take the data's shape, the truth differs from the best model in the
+family by a smooth curve that no parameter draw reproduces; the parameter intervals alone then miss it (version
+1 below). Each quantity here is read off one fitted test (the blocking force off the blocking test, the free
+strain off the stroke test, the same curves at zero strain and at about zero load), and that test's residuals at
+the posterior mean measure how far the model misses such a curve beyond the sensor noise: ``excess_rmse`` in
+``summary.json`` (:func:`peano_bayes.inference.fit.noise_excess`, the floor estimated from the raw signals
+without a model). The interval "with discrepancy" adds to each draw an independent normal value of that sd
+(the marginal predictive of an unknown discrepancy of that size); the parameter-only interval is reported too.
+
+Pre-registered, version 1 (before its first run): seed 0, material conditions of FC (200 kPa, 40 N start
+tension), the default engine and tests, 200 draws, fractions 0.25 0.5 0.75 1.0; pass = every check inside the
+parameter-only interval. Failed (4 of 8 on the AR(1) likelihood).
+Pre-registered, version 2 (2026-11-28, before its first run; the idea was formed on seed 0's result): seed 1
+(data and sampler), otherwise as version 1; pass = every check inside the interval with discrepancy.
 
     python experiments/independent_data.py [--out DIR] [--seed N] [--draws N]
 
@@ -43,6 +55,8 @@ from peano_bayes.rig import simulate_veale_dataset
 
 MATERIAL = "FC"
 FRACTIONS = (0.25, 0.5, 0.75, 1.0)
+#: Quantity -> the fitted test it is read off, whose model discrepancy it carries.
+MEASURED_BY = {"blocking_force_n": "blocking", "free_strain": "stroke"}
 
 
 def truth(pressures_pa: np.ndarray) -> dict[str, np.ndarray]:
@@ -71,18 +85,34 @@ def predicted(idata, pressures_pa: np.ndarray, n_draws: int, seed: int, geometry
     return {"blocking_force_n": np.asarray(force), "free_strain": np.asarray(strain)}
 
 
-def checks(idata, pressures_pa: np.ndarray, n_draws: int, seed: int, geometry) -> list[dict]:
-    """Per quantity and pressure: Veale's truth against the new-specimen 94 % interval."""
+def discrepancy_sd(summary: dict) -> dict[str, float]:
+    """Quantity -> sd of the model discrepancy it carries: the RMSE beyond the sensor noise of the test it is
+    read off (:data:`MEASURED_BY`), at the posterior mean."""
+    quality = summary["fit_quality_posterior_mean"]
+    missing = [t for t in MEASURED_BY.values() if "excess_rmse" not in quality.get(t, {})]
+    if missing:
+        raise SystemExit(f"summary.json has no excess_rmse for {missing}: sample it with this version of the package")
+    return {q: float(quality[t]["excess_rmse"]) for q, t in MEASURED_BY.items()}
+
+
+def checks(
+    idata, pressures_pa: np.ndarray, n_draws: int, seed: int, geometry, discrepancy: dict[str, float]
+) -> list[dict]:
+    """Per quantity and pressure: Veale's truth against the new-specimen 94 % interval, with the model
+    discrepancy of ``discrepancy`` (quantity -> sd) and without it (``parameter_*``)."""
     true = truth(pressures_pa)
     pred = predicted(idata, pressures_pa, n_draws, seed, geometry)
+    rng = np.random.default_rng(seed)
     rows = []
-    for quantity in ("blocking_force_n", "free_strain"):
+    for quantity in MEASURED_BY:
         for j, p in enumerate(pressures_pa):
             draws = pred[quantity][:, j]
             draws = draws[np.isfinite(draws)]
             if draws.size < 2:
                 raise RuntimeError(f"{quantity} at {p / 1e3:g} kPa: the physics failed for (almost) every draw")
-            low, high = (float(v) for v in az.hdi(draws, hdi_prob=HDI_PROB))
+            with_discrepancy = draws + rng.normal(0.0, discrepancy[quantity], draws.size)
+            low, high = (float(v) for v in az.hdi(with_discrepancy, hdi_prob=HDI_PROB))
+            p_low, p_high = (float(v) for v in az.hdi(draws, hdi_prob=HDI_PROB))
             value = float(true[quantity][j])
             rows.append(
                 {
@@ -90,9 +120,13 @@ def checks(idata, pressures_pa: np.ndarray, n_draws: int, seed: int, geometry) -
                     "pressure_kpa": float(p) / 1e3,
                     "truth": value,
                     "median": float(np.median(draws)),
+                    "discrepancy_sd": discrepancy[quantity],
                     "hdi_low": low,
                     "hdi_high": high,
                     "inside": bool(low <= value <= high),
+                    "parameter_hdi_low": p_low,
+                    "parameter_hdi_high": p_high,
+                    "inside_parameter_interval": bool(p_low <= value <= p_high),
                     "n_draws": int(draws.size),
                 }
             )
@@ -102,7 +136,7 @@ def checks(idata, pressures_pa: np.ndarray, n_draws: int, seed: int, geometry) -
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=Path("results-independent"), help="output folder")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the data and the sampler (default 0)")
+    parser.add_argument("--seed", type=int, default=1, help="seed of the data and the sampler (default 1)")
     parser.add_argument("--draws", type=int, default=200, help="posterior draws pushed through (default 200)")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
@@ -118,13 +152,17 @@ def main() -> None:
         summary = infer(data_file, args.out, seed=args.seed, resume=True, label=label, figures=False)
     idata = load_result(result_dir)
     pressures = np.asarray(FRACTIONS) * material(MATERIAL).test_pressure_pa
-    rows = checks(idata, pressures, args.draws, args.seed, load(data_file).geometry)
-    print(f"{'quantity':<18}{'p [kPa]':>8}{'truth':>10}{'median':>10}{'94 % interval':>24}  inside")
+    rows = checks(idata, pressures, args.draws, args.seed, load(data_file).geometry, discrepancy_sd(summary))
+    print(
+        f"{'quantity':<18}{'p [kPa]':>8}{'truth':>10}{'median':>10}{'94 %, parameters':>24}"
+        f"{'94 %, with discrepancy':>26}  inside"
+    )
     for r in rows:
+        parameters = f"[{r['parameter_hdi_low']:.4g}, {r['parameter_hdi_high']:.4g}]"
         interval = f"[{r['hdi_low']:.4g}, {r['hdi_high']:.4g}]"
         print(
-            f"{r['quantity']:<18}{r['pressure_kpa']:>8.0f}{r['truth']:>10.4g}{r['median']:>10.4g}{interval:>24}"
-            f"  {'yes' if r['inside'] else 'NO'}"
+            f"{r['quantity']:<18}{r['pressure_kpa']:>8.0f}{r['truth']:>10.4g}{r['median']:>10.4g}{parameters:>24}"
+            f"{interval:>26}  {'yes' if r['inside'] else 'NO'}"
         )
     report = {
         "material_conditions": MATERIAL,
@@ -133,6 +171,7 @@ def main() -> None:
         "inside": sum(r["inside"] for r in rows),
         "total": len(rows),
         "passed": all(r["inside"] for r in rows),
+        "inside_parameter_interval": sum(r["inside_parameter_interval"] for r in rows),
         "checks": rows,
     }
     write_text(args.out / "independent_data.json", json.dumps(report, indent=2) + "\n")

@@ -646,7 +646,7 @@ def test_held_out_ties_within_two_standard_errors_of_block_sums():
 
 
 def test_noise_excess_is_what_the_model_misses_beyond_the_noise(rng):
-    from peano_bayes.discovery.workflow import noise_excess
+    from peano_bayes.inference.fit import noise_excess
 
     floor = np.full(4000, 0.2)
     noise = rng.normal(0.0, 0.2, 4000)

@@ -61,12 +61,13 @@ def test_results_page_shows_population_new_specimen_and_weakly_informed_paramete
 
 
 def test_the_results_page_flags_a_test_whose_residuals_have_structure():
-    quality = {"unit": "N", "rmse": 2.1, "max_error": 5.4, "r2": 0.9975}
+    quality = {"unit": "N", "rmse": 2.1, "max_error": 5.4, "r2": 0.9975, "excess_rmse": 2.05}
     correlated = {"lag1": 0.95, "pairs": 2388, "interval_factor": 6.2, "consistent_with_noise": False}
     white = {"lag1": -0.03, "pairs": 2388, "interval_factor": 1.0, "consistent_with_noise": True}
     summary = {**_summary(0.9), "fit_quality_posterior_mean": {"load_cycle": quality}}
     page = index_markdown([{**summary, "residual_correlation": {"load_cycle": correlated}}])
-    assert "| load_cycle | 2.1 N | 5.4 N | 0.9975 | 0.95 (structured) |" in page
+    assert "| load_cycle | 2.1 N | 5.4 N | 0.9975 | 2.05 N | 0.95 (structured) |" in page
+    assert "differs from what the model predicts by about that test's RMSE beyond the sensor noise" in page
     assert "**Misfit with structure** in load_cycle" in page
     assert "The intervals that load_cycle inform are narrower than the data justify" in page
     adopted = index_markdown(
@@ -79,7 +80,7 @@ def test_the_results_page_flags_a_test_whose_residuals_have_structure():
     assert "| -0.03 (sampled as AR(1), lag-1 0.93: structured at the mode) |" in marked
     assert "took the residuals of load_cycle as AR(1)" in marked
     quiet = index_markdown([{**summary, "residual_correlation": {"load_cycle": white}}])
-    assert "| load_cycle | 2.1 N | 5.4 N | 0.9975 | -0.03 |" in quiet and "Misfit with structure" not in quiet
+    assert "| load_cycle | 2.1 N | 5.4 N | 0.9975 | 2.05 N | -0.03 |" in quiet and "Misfit with structure" not in quiet
 
 
 def test_a_ridge_is_named_with_the_combination_the_data_determine():

@@ -47,7 +47,7 @@ import numpy as np
 
 from ..data import Dataset
 from ..errors import PeanoBayesInputError
-from ..inference.denoise import noise_sd
+from ..inference.fit import sensor_noise
 from ..inference.likelihood import OBSERVED, RunGroup, mean_error_factor, prepare
 from .model import DiscoveryData
 
@@ -255,22 +255,14 @@ def _covariates(groups, cycles, session_start: dict) -> Covariates:
     return Covariates(**{k: np.concatenate(v) for k, v in cols.items()})
 
 
-#: Tests whose signal changes slowly against the sampling rate: the noise of each sensor is estimated there.
-_QUIET_TESTS = {"force_n": ("load_cycle", "blocking"), "strain": ("stroke", "load_cycle", "blocking")}
-
-
 def _sensor_noise(runs, specimen: str) -> dict:
-    """Per test, the noise sd of its observed signal's sensor, estimated where that sensor's signal is slow
-    (a step response rings faster than it is sampled, so second differences there overstate the noise)."""
-    noise = {}
-    for test in {run.test for run in runs}:
-        signal = OBSERVED[test][0]
-        quiet = [r for r in runs if r.test in _QUIET_TESTS[signal] and np.all(np.isfinite(getattr(r, signal)))]
-        source = quiet or [r for r in runs if r.test == test]
-        noise[test] = float(np.median([noise_sd(getattr(r, signal)) for r in source]))
-        if not noise[test] > 0:
+    """Per test, the model-free noise sd of one raw sample of its observed signal
+    (:func:`~peano_bayes.inference.fit.sensor_noise`); a signal without noise cannot scale residuals."""
+    noise = sensor_noise(runs)
+    for test, sd in noise.items():
+        if not sd > 0:
             raise PeanoBayesInputError(
-                f"the {signal} signal of specimen {specimen!r} shows no noise; cannot scale residuals"
+                f"the {OBSERVED[test][0]} signal of specimen {specimen!r} shows no noise; cannot scale residuals"
             )
     return noise
 

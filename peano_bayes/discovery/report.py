@@ -13,8 +13,8 @@ from .. import plots
 from ..atomic import write_text
 from ..figures import save
 from ..formatting import format_number
+from ..inference.fit import NOISE_CONSISTENCY_SE
 from .effects import ABSORBS, CONFUSABLE, LIBRARY
-from .workflow import NOISE_CONSISTENCY_SE
 
 _UNIT = {"load_cycle": "N", "blocking": "N", "stroke": "-", "step": "-"}
 

@@ -67,6 +67,7 @@ from dataclasses import asdict, dataclass, fields
 import numpy as np
 from scipy import stats
 
+from ..inference.fit import lag1_effective_size, noise_excess
 from ..physics import PARAMETERS
 from .data import Covariates, SplitData
 from .diagnose import SQUARED, Diagnosis, diagnose, signature_statistic, signature_weights
@@ -133,21 +134,9 @@ def within_two_se(best: np.ndarray, other: np.ndarray, blocks: np.ndarray) -> bo
     return bool(d.sum() <= 2.0 * se)
 
 
-def _n_eff(r: np.ndarray) -> float:
-    n = r.size
-    rho = float(np.corrcoef(r[:-1], r[1:])[0, 1]) if n > 2 and np.std(r) > 0 else 0.0
-    rho = min(max(rho, 0.0), 0.99)
-    return n * (1 - rho) / (1 + rho)
-
-
 def _rmse(a: np.ndarray) -> float:
     a = a[np.isfinite(a)]
     return float(np.sqrt(np.mean(a**2))) if a.size else float("nan")
-
-
-#: Residuals are called consistent with the noise when their mean square over the noise floor's is within this
-#: many standard errors of 1 (chi-square: sd sqrt(2 / n_eff), n_eff from the lag-one autocorrelation).
-NOISE_CONSISTENCY_SE = 3.0
 
 
 def noise_floor(data) -> np.ndarray:
@@ -158,27 +147,10 @@ def noise_floor(data) -> np.ndarray:
     return np.concatenate([np.broadcast_to(np.asarray(sd, dtype=float), g.observed.shape).ravel() for g, sd in pairs])
 
 
-def noise_excess(error: np.ndarray, floor: np.ndarray) -> dict:
-    """How far residuals ``error`` (n,) [signal unit] are above their noise ``floor`` (n,): the noise floor's
-    RMSE, the **excess RMSE** sqrt(max(RMSE^2 - floor^2, 0)) (what the model misses beyond the noise, in the
-    signal's unit) and whether the residuals are consistent with noise (:data:`NOISE_CONSISTENCY_SE`)."""
-    ok = np.isfinite(error) & np.isfinite(floor) & (floor > 0)
-    if not ok.any():
-        return {"noise_floor_rmse": float("nan"), "excess_rmse": float("nan"), "consistent_with_noise": False}
-    e, f = error[ok], floor[ok]
-    ratio = float(np.mean((e / f) ** 2))
-    tolerance = NOISE_CONSISTENCY_SE * np.sqrt(2.0 / max(_n_eff(e / f), 1.0))
-    return {
-        "noise_floor_rmse": _rmse(f),
-        "excess_rmse": float(np.sqrt(max(np.mean(e**2) - np.mean(f**2), 0.0))),
-        "consistent_with_noise": bool(abs(ratio - 1.0) <= tolerance),
-    }
-
-
 def gap_table(fit_eval: Evaluation, held_eval: Evaluation, split: SplitData) -> dict:
     """Per test and split: RMSE and max |error| [signal unit], the standardized RMSE (1 = the fitted noise
-    level), and against the model-free noise floor (:func:`noise_excess`): its RMSE, the excess RMSE and
-    whether the residuals are consistent with noise."""
+    level), and against the model-free noise floor (:func:`~peano_bayes.inference.fit.noise_excess`): its RMSE,
+    the excess RMSE and whether the residuals are consistent with noise."""
     out = {}
     parts = (
         ("fit", fit_eval, split.fit_covariates, split.fit),
@@ -325,7 +297,7 @@ def _score(
     delta_elpd = float(diff.sum())
     se = float(np.sqrt(block_diff.size) * np.std(block_diff, ddof=1)) if block_diff.size > 1 else float("inf")
     n = fit_eval.r.size
-    n_eff = _n_eff(fit_eval.r)
+    n_eff = lag1_effective_size(fit_eval.r)
     delta_loglik = float(fit_eval.loglik.sum() - before_fit.loglik.sum())
     delta_k = fit.n_free - before.n_free
     delta_bic = -2.0 * (n_eff / n) * delta_loglik + delta_k * np.log(n_eff)

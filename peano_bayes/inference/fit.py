@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from types import MappingProxyType
 
 import equinox as eqx
 import jax
@@ -20,6 +21,7 @@ import optimistix as optx
 
 from ..defaults import DEFAULT_STARTS
 from ..physics import ModelConfig
+from .denoise import noise_sd
 from .likelihood import OBSERVED, SOLVER_TOLERANCE, Observations, bin_noise_sd, predict, whitened_residuals
 from .priors import Prior
 
@@ -144,18 +146,73 @@ def predictions(params, observations: Observations, config: ModelConfig) -> list
     return [np.asarray(x) for x in _all_predictions(params, observations.groups, config, observations.geometry)]
 
 
-def fit_quality(params, observations: Observations, config: ModelConfig, predicted=None) -> dict:
+#: Residuals are called consistent with the noise when their mean square over the noise floor's is within this
+#: many standard errors of 1 (chi-square: sd sqrt(2 / n_eff), n_eff from the lag-one autocorrelation).
+NOISE_CONSISTENCY_SE = 3.0
+
+#: Per observed signal, the tests whose signal changes slowly against the sampling rate: that sensor's noise is
+#: estimated there (a step response rings faster than it is sampled, so second differences overstate it).
+QUIET_TESTS = MappingProxyType({"force_n": ("load_cycle", "blocking"), "strain": ("stroke", "load_cycle", "blocking")})
+
+
+def sensor_noise(runs) -> dict[str, float]:
+    """test -> model-free sd of one raw sample of its observed signal [signal unit], for every test in ``runs``
+    (:class:`~peano_bayes.data.Run`): the median over runs of :func:`~peano_bayes.inference.denoise.noise_sd`
+    (second differences), taken where that sensor's signal is slow (:data:`QUIET_TESTS`), else on the test's
+    own runs. Known before any model is fitted, so it is the floor a correct model's residuals reach."""
+    noise = {}
+    for test in {run.test for run in runs}:
+        signal = OBSERVED[test][0]
+        quiet = [r for r in runs if r.test in QUIET_TESTS[signal] and np.all(np.isfinite(getattr(r, signal)))]
+        source = quiet or [r for r in runs if r.test == test]
+        noise[test] = float(np.median([noise_sd(getattr(r, signal)) for r in source]))
+    return noise
+
+
+def lag1_effective_size(r: np.ndarray) -> float:
+    """Effective number of independent values in the sequence ``r`` (n,): n (1 - rho) / (1 + rho), rho its lag-1
+    correlation clipped to [0, 0.99] (exact for the variance of the mean of AR(1) values)."""
+    n = r.size
+    rho = float(np.corrcoef(r[:-1], r[1:])[0, 1]) if n > 2 and np.std(r) > 0 else 0.0
+    rho = min(max(rho, 0.0), 0.99)
+    return n * (1 - rho) / (1 + rho)
+
+
+def noise_excess(error: np.ndarray, floor: np.ndarray) -> dict:
+    """How far residuals ``error`` (n,) [signal unit] are above their noise ``floor`` (n,) (each bin's sd from
+    the sensor noise alone): the noise floor's RMSE, the **excess RMSE** sqrt(max(RMSE^2 - floor^2, 0)) (what
+    the model misses beyond the noise, in the signal's unit) and whether the residuals are consistent with
+    noise (:data:`NOISE_CONSISTENCY_SE`)."""
+    ok = np.isfinite(error) & np.isfinite(floor) & (floor > 0)
+    if not ok.any():
+        return {"noise_floor_rmse": float("nan"), "excess_rmse": float("nan"), "consistent_with_noise": False}
+    e, f = error[ok], floor[ok]
+    ratio = float(np.mean((e / f) ** 2))
+    tolerance = NOISE_CONSISTENCY_SE * np.sqrt(2.0 / max(lag1_effective_size(e / f), 1.0))
+    return {
+        "noise_floor_rmse": float(np.sqrt(np.mean(f**2))),
+        "excess_rmse": float(np.sqrt(max(np.mean(e**2) - np.mean(f**2), 0.0))),
+        "consistent_with_noise": bool(abs(ratio - 1.0) <= tolerance),
+    }
+
+
+def fit_quality(params, observations: Observations, config: ModelConfig, predicted=None, noise=None) -> dict:
     """Per test: RMSE, max |error| (in the observed signal's unit) and R^2 over the binned data. ``predicted``:
-    each group's prediction at ``params``, if already computed."""
+    each group's prediction at ``params``, if already computed. ``noise``: test -> model-free sd of one raw
+    sample (:func:`sensor_noise`); with it each test also carries :func:`noise_excess`'s ``noise_floor_rmse``
+    and ``excess_rmse`` (each bin's floor that sd over sqrt(samples in the bin)): the size of what the model
+    misses beyond the noise, the model discrepancy a prediction read off this test should carry."""
     quality = {}
     predicted = predictions(params, observations, config) if predicted is None else predicted
     for group, prediction in zip(observations.groups, predicted, strict=True):
         observed = np.asarray(group.observed)
-        error = (observed - prediction)[np.isfinite(observed)]
-        values = observed[np.isfinite(observed)]
-        entry = quality.setdefault(group.test, {"errors": [], "values": []})
-        entry["errors"].append(error)
-        entry["values"].append(values)
+        measured = np.isfinite(observed)
+        entry = quality.setdefault(group.test, {"errors": [], "values": [], "floors": []})
+        entry["errors"].append((observed - prediction)[measured])
+        entry["values"].append(observed[measured])
+        if noise is not None and group.test in noise:
+            floor = noise[group.test] / np.sqrt(np.maximum(np.asarray(group.counts, float), 1.0))
+            entry["floors"].append(np.broadcast_to(floor, observed.shape)[measured])
     out = {}
     for test, entry in quality.items():
         error, values = np.concatenate(entry["errors"]), np.concatenate(entry["values"])
@@ -167,6 +224,9 @@ def fit_quality(params, observations: Observations, config: ModelConfig, predict
             "r2": float(1.0 - np.sum(error**2) / np.sum((values - values.mean()) ** 2)),
             "bins": int(error.size),
         }
+        if entry["floors"]:
+            excess = noise_excess(error, np.concatenate(entry["floors"]))
+            out[test].update(noise_floor_rmse=excess["noise_floor_rmse"], excess_rmse=excess["excess_rmse"])
     return out
 
 
@@ -303,9 +363,7 @@ def fit(
             best = (float(costs[i]), values[i], np.asarray(jacs[i]), [np.asarray(q[i]) for q in predictions],
                     bool(converged[i]))  # fmt: skip
         if best is None:
-            raise RuntimeError(
-                f"all {n_starts} least-squares starts failed (non-finite, or the physics solver missed)"
-            )
+            raise RuntimeError(f"all {n_starts} least-squares starts failed (non-finite, or the physics solver missed)")
         if best[4] or failed.all():
             break
         # Every start that has not failed continues from where it stopped; a failed one reruns its last start.
@@ -336,12 +394,17 @@ __all__ = [
     "CORRELATION_LIMIT",
     "DEFAULT_NOISE",
     "FitResult",
+    "NOISE_CONSISTENCY_SE",
+    "QUIET_TESTS",
     "dense_jacobian",
     "fit",
     "fit_quality",
+    "lag1_effective_size",
     "lag1_sums",
+    "noise_excess",
     "predictions",
     "residual_correlation",
     "residual_function",
+    "sensor_noise",
     "structured_lag1",
 ]
