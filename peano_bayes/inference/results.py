@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import warnings
 from importlib import metadata
 from pathlib import Path
 
@@ -83,6 +84,27 @@ def _predictions(posterior: Posterior, thetas: np.ndarray, rng: np.random.Genera
     return ll, mean + scale * rng.standard_normal(mean.shape)
 
 
+def _pointwise_data(ll, yrep, observed: dict, coords: dict):
+    """The pointwise groups (log likelihood, posterior predictive, observed bins) of :func:`to_inference_data`."""
+    return az.from_dict(
+        log_likelihood={"y": ll},
+        posterior_predictive={"y": yrep},
+        observed_data={
+            "y": observed["value"],
+            "test": observed["test"],
+            "specimen": observed["specimen"],
+            "run": observed["run"],
+            "time_s": observed["time_s"],
+            "count": observed["count"],
+            "unit": observed["unit"],
+            "strain": observed["strain"],
+            "pressure_pa": observed["pressure_pa"],
+        },
+        coords=coords,
+        dims={k: ["bin"] for k in ("y", "test", "specimen", "run", "time_s", "count", "unit", "strain", "pressure_pa")},
+    )
+
+
 def to_inference_data(posterior: Posterior, result: SampleResult, *, seed: int, attrs: dict | None = None):
     """The :mod:`arviz` InferenceData of a sampling run (see the module docstring)."""
     kept = result.kept()  # (walkers, steps, D)
@@ -109,23 +131,13 @@ def to_inference_data(posterior: Posterior, result: SampleResult, *, seed: int, 
         coords={"draw": draws + result.convergence.discard, "specimen": list(posterior.observations.specimens)},
         dims={k: ["specimen"] for k in post_draws if k.startswith(SPECIMEN_PREFIX)},
     )
-    pointwise = az.from_dict(
-        log_likelihood={"y": ll},
-        posterior_predictive={"y": yrep},
-        observed_data={
-            "y": observed["value"],
-            "test": observed["test"],
-            "specimen": observed["specimen"],
-            "run": observed["run"],
-            "time_s": observed["time_s"],
-            "count": observed["count"],
-            "unit": observed["unit"],
-            "strain": observed["strain"],
-            "pressure_pa": observed["pressure_pa"],
-        },
-        coords={**bin_coords, "draw": draws[subset] + result.convergence.discard},
-        dims={k: ["bin"] for k in ("y", "test", "specimen", "run", "time_s", "count", "unit", "strain", "pressure_pa")},
-    )
+    # Each walker is a chain with a few pointwise draws; arviz warns when chains outnumber draws (its guess at a
+    # transposed array), which here is the intended shape.
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=r"More chains \(\d+\) than draws", category=UserWarning)
+        pointwise = _pointwise_data(
+            ll, yrep, observed, {**bin_coords, "draw": draws[subset] + result.convergence.discard}
+        )
     idata.extend(pointwise)
     idata.extend(az.from_dict(prior=prior_draws))
     provenance = _attrs(posterior, result, seed, attrs)
