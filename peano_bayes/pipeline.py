@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import time
 from pathlib import Path
 
@@ -268,6 +269,8 @@ def infer(
     """
     timings = {}
     dataset = load(data) if not isinstance(data, Dataset) else data
+    # The sensors' noise from every run of the file, before tests are left out: the quiet tests estimate it best.
+    noise = sensor_noise(dataset.runs)
     dataset = select_tests(dataset, tests)
     code = dataset.material.code
     whole_prior = prior_of(dataset, prior)
@@ -393,7 +396,7 @@ def infer(
     theta_mean = result.kept().reshape(-1, posterior.ndim).mean(axis=0)
     params_mean = posterior.params(theta_mean)
     predicted = predictions(params_mean, posterior.observations, config)
-    quality = fit_quality(params_mean, observations, config, predicted, noise=sensor_noise(dataset.runs))
+    quality = fit_quality(params_mean, observations, config, predicted, noise=noise)
     # Whether each test's misfit is noise: the likelihood's intervals hold only if it is.
     correlation = residual_correlation(params_mean, posterior.observations, config, predicted)
     for test, c in correlation.items():
@@ -558,6 +561,15 @@ MATERIAL_FIGURES = {
 }
 
 
+def _finite(x) -> bool:
+    return x is not None and math.isfinite(x)
+
+
+def _with_unit(x, unit: str) -> str:
+    """``x`` to three significant digits with its unit; empty where ``x`` is missing or not finite."""
+    return f"{format_number(x)} {unit}" if _finite(x) else ""
+
+
 def index_markdown(
     summaries: list[dict],
     metrics: dict | None = None,
@@ -639,8 +651,7 @@ def index_markdown(
             lines.append(
                 f"| {test} | {format_number(q['rmse'], nonfinite=None)} {q['unit']} | "
                 f"{format_number(q['max_error'], nonfinite=None)} {q['unit']} | {q['r2']:.4f} | "
-                f"{'' if q.get('excess_rmse') is None else format_number(q['excess_rmse']) + ' ' + q['unit']} | "
-                f"{lag} |"
+                f"{_with_unit(q.get('excess_rmse'), q['unit'])} | {lag} |"
             )
         adopted = [t for t, c in correlation.items() if c.get("likelihood_lag1") is not None]
         structured = [t for t, c in correlation.items() if not c["consistent_with_noise"] or t in adopted]
@@ -664,10 +675,14 @@ def index_markdown(
                     if unadopted
                     else ""
                 )
-                + "A quantity read off one of these tests (a blocking force, a free strain) differs from what the "
-                "model predicts by about that test's RMSE beyond the sensor noise, which no interval here includes "
-                "(*Model discrepancy* in the project's docs/inference.md). "
-                "Try `--discover`.",
+                + (
+                    "A quantity read off one of these tests can be off the model's prediction by roughly that "
+                    "test's RMSE beyond the sensor noise, which no interval here includes (*Model discrepancy* in "
+                    "the project's docs/inference.md). "
+                    if any(_finite(s["fit_quality_posterior_mean"].get(t, {}).get("excess_rmse")) for t in structured)
+                    else ""
+                )
+                + "Try `--discover`.",
             ]
         reference = (references or {}).get(s["material"])
         ours = s["fit_quality_posterior_mean"].get("load_cycle")

@@ -214,6 +214,9 @@ def test_units_on_a_dask_cluster_survive_a_killed_worker_and_equal_a_serial_run(
     summary = json.loads((serial_out / "TP" / "summary.json").read_text())
     assert summary["resumed_from_step"] == 120
     assert serial_state.exists() != summary["convergence"]["converged"]  # a converged run leaves none
+    for test, q in summary["fit_quality_posterior_mean"].items():  # the fit's model discrepancy, beside its RMSE
+        floor = q["noise_floor_rmse"]
+        assert 0 < floor and q["excess_rmse"] == pytest.approx(np.sqrt(max(q["rmse"] ** 2 - floor**2, 0.0))), test
     # The result file: all six groups, provenance attrs, pointwise arrays aligned with the observed bins.
     idata = az.from_netcdf(serial_out / "TP" / "posterior.nc")
     for group in ("posterior", "sample_stats", "log_likelihood", "posterior_predictive", "observed_data", "prior"):

@@ -160,24 +160,32 @@ def test_fit_quality_reads_a_two_specimen_posteriors_parameters(stroke_data):
 
 def test_excess_over_the_sensor_noise_measures_a_missing_offset_and_not_the_noise():
     """The model-free sensor noise (second differences of the raw signals) recovers the rig's noise; at the
-    true parameters the residuals' RMSE beyond that floor is small against it, and a 0.5 N offset the model
-    cannot take comes out as about 0.5 N beyond the noise."""
+    true parameters the residuals' RMSE beyond that floor stays below it (blocking: small; stroke: most of the
+    floor, the fitted driving pressure's error carried through), and a 0.5 N offset the model cannot take comes
+    out as about 0.5 N beyond the noise. A signal without measurable noise gets no floor."""
     import dataclasses
 
     from peano_bayes.inference.fit import fit_quality, sensor_noise
 
-    data = simulate_dataset("TP", None, seed=8, specimens=1, repeats=3, specimen_spread=0.0, tests=("blocking",))
+    data = simulate_dataset(
+        "TP", None, seed=8, specimens=1, repeats=3, specimen_spread=0.0, tests=("blocking", "stroke")
+    )
     truth = {k: jnp.asarray(v) for k, v in DEFAULT_CONFIG.nominal_parameters().items()}
     noise = sensor_noise(data.runs)
     assert noise["blocking"] == pytest.approx(RigNoise().force_sd_n, rel=0.05)
+    assert noise["stroke"] == pytest.approx(RigNoise().strain_sd, rel=0.05)
     observations = prepare(data)
-    exact = fit_quality(truth, observations, DEFAULT_CONFIG, noise=noise)["blocking"]
-    assert exact["noise_floor_rmse"] == pytest.approx(exact["rmse"], rel=0.1)
-    assert exact["excess_rmse"] < 0.2 * exact["noise_floor_rmse"]
-    shifted = [dataclasses.replace(g, observed=g.observed + 0.5) for g in observations.groups]
+    exact = fit_quality(truth, observations, DEFAULT_CONFIG, noise=noise)
+    assert exact["blocking"]["noise_floor_rmse"] == pytest.approx(exact["blocking"]["rmse"], rel=0.1)
+    assert exact["blocking"]["excess_rmse"] < 0.2 * exact["blocking"]["noise_floor_rmse"]
+    assert exact["stroke"]["excess_rmse"] < exact["stroke"]["noise_floor_rmse"]
+    shifted = [dataclasses.replace(g, observed=g.observed + 0.5 * (g.test == "blocking")) for g in observations.groups]
     offset = fit_quality(truth, dataclasses.replace(observations, groups=tuple(shifted)), DEFAULT_CONFIG, noise=noise)
     assert offset["blocking"]["excess_rmse"] == pytest.approx(0.5, rel=0.05)
+    assert offset["stroke"]["excess_rmse"] == exact["stroke"]["excess_rmse"]
     assert "excess_rmse" not in fit_quality(truth, observations, DEFAULT_CONFIG)["blocking"]
+    silent = fit_quality(truth, observations, DEFAULT_CONFIG, noise={**noise, "stroke": 0.0})
+    assert "excess_rmse" not in silent["stroke"] and "excess_rmse" in silent["blocking"]
 
 
 def test_batches_in_fixed_rows_equal_one_call_and_compile_once(stroke_data):

@@ -199,9 +199,10 @@ def noise_excess(error: np.ndarray, floor: np.ndarray) -> dict:
 def fit_quality(params, observations: Observations, config: ModelConfig, predicted=None, noise=None) -> dict:
     """Per test: RMSE, max |error| (in the observed signal's unit) and R^2 over the binned data. ``predicted``:
     each group's prediction at ``params``, if already computed. ``noise``: test -> model-free sd of one raw
-    sample (:func:`sensor_noise`); with it each test also carries :func:`noise_excess`'s ``noise_floor_rmse``
-    and ``excess_rmse`` (each bin's floor that sd over sqrt(samples in the bin)): the size of what the model
-    misses beyond the noise, the model discrepancy a prediction read off this test should carry."""
+    sample (:func:`sensor_noise`); with it each test whose sd is positive also carries :func:`noise_excess`'s
+    ``noise_floor_rmse`` and ``excess_rmse`` (each bin's floor that sd over sqrt(samples in the bin)): the size
+    of what the model misses beyond the sensor noise (the fitted inputs' error carried through included), a
+    rough size of the discrepancy a prediction read off this test carries."""
     quality = {}
     predicted = predictions(params, observations, config) if predicted is None else predicted
     for group, prediction in zip(observations.groups, predicted, strict=True):
@@ -210,7 +211,7 @@ def fit_quality(params, observations: Observations, config: ModelConfig, predict
         entry = quality.setdefault(group.test, {"errors": [], "values": [], "floors": []})
         entry["errors"].append((observed - prediction)[measured])
         entry["values"].append(observed[measured])
-        if noise is not None and group.test in noise:
+        if noise is not None and noise.get(group.test, 0.0) > 0:  # a signal without measurable noise has no floor
             floor = noise[group.test] / np.sqrt(np.maximum(np.asarray(group.counts, float), 1.0))
             entry["floors"].append(np.broadcast_to(floor, observed.shape)[measured])
     out = {}
