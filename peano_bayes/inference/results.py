@@ -125,16 +125,16 @@ def to_inference_data(posterior: Posterior, result: SampleResult, *, seed: int, 
     prior_draws = {k: np.asarray(v)[None] for k, v in posterior.prior.from_unconstrained(prior_theta).items()}
     post_draws = physical_draws(posterior, kept, seed)
     bin_coords = {"bin": np.arange(n_bins)}
-    idata = az.from_dict(
-        posterior=post_draws,
-        sample_stats={"lp": lp},
-        coords={"draw": draws + result.convergence.discard, "specimen": list(posterior.observations.specimens)},
-        dims={k: ["specimen"] for k in post_draws if k.startswith(SPECIMEN_PREFIX)},
-    )
-    # Each walker is a chain with a few pointwise draws; arviz warns when chains outnumber draws (its guess at a
-    # transposed array), which here is the intended shape.
+    # Every walker is a chain; arviz warns when chains outnumber draws (its guess at a transposed array), which
+    # here is the intended shape: a short run, or the few pointwise draws per walker.
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=r"More chains \(\d+\) than draws", category=UserWarning)
+        idata = az.from_dict(
+            posterior=post_draws,
+            sample_stats={"lp": lp},
+            coords={"draw": draws + result.convergence.discard, "specimen": list(posterior.observations.specimens)},
+            dims={k: ["specimen"] for k in post_draws if k.startswith(SPECIMEN_PREFIX)},
+        )
         pointwise = _pointwise_data(
             ll, yrep, observed, {**bin_coords, "draw": draws[subset] + result.convergence.discard}
         )
