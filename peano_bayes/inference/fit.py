@@ -364,7 +364,9 @@ def fit(
             best = (float(costs[i]), values[i], np.asarray(jacs[i]), [np.asarray(q[i]) for q in predictions],
                     bool(converged[i]))  # fmt: skip
         if best is None:
-            raise RuntimeError(f"all {n_starts} least-squares starts failed (non-finite, or the physics solver missed)")
+            raise RuntimeError(
+                f"all {n_starts} least-squares starts failed (non-finite, or the physics solver missed)"
+            )
         if best[4] or failed.all():
             break
         # Every start that has not failed continues from where it stopped; a failed one reruns its last start.

@@ -84,25 +84,8 @@ def _predictions(posterior: Posterior, thetas: np.ndarray, rng: np.random.Genera
     return ll, mean + scale * rng.standard_normal(mean.shape)
 
 
-def _pointwise_data(ll, yrep, observed: dict, coords: dict):
-    """The pointwise groups (log likelihood, posterior predictive, observed bins) of :func:`to_inference_data`."""
-    return az.from_dict(
-        log_likelihood={"y": ll},
-        posterior_predictive={"y": yrep},
-        observed_data={
-            "y": observed["value"],
-            "test": observed["test"],
-            "specimen": observed["specimen"],
-            "run": observed["run"],
-            "time_s": observed["time_s"],
-            "count": observed["count"],
-            "unit": observed["unit"],
-            "strain": observed["strain"],
-            "pressure_pa": observed["pressure_pa"],
-        },
-        coords=coords,
-        dims={k: ["bin"] for k in ("y", "test", "specimen", "run", "time_s", "count", "unit", "strain", "pressure_pa")},
-    )
+#: What ``observed_data`` holds of every bin beside its value ``y`` (:meth:`Posterior.observed`).
+_BIN_FIELDS = ("test", "specimen", "run", "time_s", "count", "unit", "strain", "pressure_pa")
 
 
 def to_inference_data(posterior: Posterior, result: SampleResult, *, seed: int, attrs: dict | None = None):
@@ -135,8 +118,12 @@ def to_inference_data(posterior: Posterior, result: SampleResult, *, seed: int, 
             coords={"draw": draws + result.convergence.discard, "specimen": list(posterior.observations.specimens)},
             dims={k: ["specimen"] for k in post_draws if k.startswith(SPECIMEN_PREFIX)},
         )
-        pointwise = _pointwise_data(
-            ll, yrep, observed, {**bin_coords, "draw": draws[subset] + result.convergence.discard}
+        pointwise = az.from_dict(
+            log_likelihood={"y": ll},
+            posterior_predictive={"y": yrep},
+            observed_data={"y": observed["value"], **{k: observed[k] for k in _BIN_FIELDS}},
+            coords={**bin_coords, "draw": draws[subset] + result.convergence.discard},
+            dims={k: ["bin"] for k in ("y", *_BIN_FIELDS)},
         )
     idata.extend(pointwise)
     idata.extend(az.from_dict(prior=prior_draws))
