@@ -1,7 +1,7 @@
 """Does the convergence rule certify the right posterior? A certified run against a 4x longer reference run.
 
 Reads a certified result (a converged ``peano-bayes fit`` or ``run`` folder of a bundled material: its
-``summary.json`` and ``posterior.nc``), fits the same dataset again with another seed, the same walkers,
+``summary.json`` and ``posterior.nc``), fits the same dataset again with another seed, the same walkers, warm-up,
 ensembles and tests, and exactly ``--factor`` times as many steps (``infer(min_steps=...)``: the rule may not
 stop it early), then compares every sampled quantity of the two ``posterior.nc`` files (population values,
 specimen values and contrasts, a new specimen, the spread, the noise scales): the certified run's mean and its
@@ -148,6 +148,7 @@ def main() -> None:
     # The reference's settings, as its summary.json records them: the certified run's, with its own seed.
     sampling = dict(seed=args.seed, **{k: summary[k] for k in ("tests", "n_walkers", "n_ensembles")})
     settings = dict(sampling, sampler_coordinates=summary["sampler_coordinates"])
+    warmup = summary.get("warmup", 300)  # a summary without it was made when 300 was the default
     enable_compilation_cache()
 
     label = f"{material}_reference"
@@ -162,6 +163,7 @@ def main() -> None:
             args.out,
             label=label,
             **sampling,
+            warmup=warmup,
             coordinates=summary["sampler_coordinates"]["kind"],
             min_steps=length,
             max_steps=length,

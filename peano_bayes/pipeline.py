@@ -422,6 +422,7 @@ def infer(
         "model": choice.as_dict(),
         "seed": seed,
         "n_walkers": n_walkers,
+        "warmup": warmup,
         "n_ensembles": result.n_ensembles,
         "steps": int(result.chain.shape[0]),
         "resumed_from_step": result.resumed_from,

@@ -237,9 +237,12 @@ def test_resume_continues_bit_identically(tmp_path):
 def test_resume_refuses_a_state_of_another_run(tmp_path):
     g = Gaussian()
     kw = dict(n_walkers=8, chunk=20, state_path=tmp_path / "state.npz", progress=False, log=lambda m: None)
-    sample(g, g.mean, 0.05 * np.eye(3), seed=1, max_steps=20, **kw)
+    sample(g, g.mean, 0.05 * np.eye(3), seed=1, warmup=10, max_steps=20, **kw)
     with pytest.raises(PeanoBayesInputError, match="another run"):
-        sample(g, g.mean, 0.05 * np.eye(3), seed=2, max_steps=40, resume=True, **kw)
+        sample(g, g.mean, 0.05 * np.eye(3), seed=2, warmup=10, max_steps=40, resume=True, **kw)
+    # Another warm-up is another run too, and the message gives the saved one (the default changed once).
+    with pytest.raises(PeanoBayesInputError, match="seed 1, --warmup 10 and"):
+        sample(g, g.mean, 0.05 * np.eye(3), seed=1, warmup=20, max_steps=40, resume=True, **kw)
 
 
 def test_too_few_walkers_for_the_dimension_is_an_input_error():

@@ -450,11 +450,10 @@ def sample(
         saved.setdefault("coordinates", {"kind": "theta"})
         if any(saved.get(k) != v for k, v in meta.items()):
             raise PeanoBayesInputError(
-                f"{state_path}: saved state is of another run (names, walkers, ensembles, seed, warm-up or sampler "
-                "coordinates differ); "
-                f"it was written in {saved['coordinates']['kind']} coordinates, so --coordinates "
-                f"{saved['coordinates']['kind']} resumes it if the rest matches, else "
-                "delete it or run without --resume"
+                f"{state_path}: saved state is of another run: it was written with {saved.get('n_walkers')} walkers, "
+                f"{saved['n_ensembles']} ensemble(s), seed {saved.get('seed')}, --warmup {saved.get('warmup')} and "
+                f"--coordinates {saved['coordinates']['kind']}, and one of these or the sampled parameters differ "
+                "now; give the same options to resume it, else delete it or run without --resume"
             )
         states = [
             emcee.State(chain[-1, e * per : (e + 1) * per], log_prob=lps[-1, e * per : (e + 1) * per], random_state=r)
