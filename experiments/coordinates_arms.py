@@ -35,6 +35,7 @@ def arm(code: str, kind: str, out: str, steps: int, seed: int) -> dict:
         seed=seed,
         max_steps=steps,
         chunk=steps,
+        warmup=300,  # the protocol of the recorded table (the default then)
         progress=False,
         figures=False,
         coordinates=kind,

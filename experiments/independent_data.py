@@ -148,6 +148,9 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("results-independent"), help="output folder")
     parser.add_argument("--seed", type=int, default=1, help="seed of the data and the sampler (default 1)")
     parser.add_argument("--draws", type=int, default=200, help="posterior draws pushed through (default 200)")
+    parser.add_argument(
+        "--warmup", type=int, default=300, help="sampler warm-up steps (default 300: the pre-registered protocol's)"
+    )
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     label = f"veale-seed{args.seed}"
@@ -159,7 +162,9 @@ def main() -> None:
     if finished:  # a finished result is read, not sampled again
         summary = json.loads((result_dir / "summary.json").read_text())
     else:
-        summary = infer(data_file, args.out, seed=args.seed, resume=True, label=label, figures=False)
+        summary = infer(
+            data_file, args.out, seed=args.seed, resume=True, label=label, figures=False, warmup=args.warmup
+        )
     idata = load_result(result_dir)
     pressures = np.asarray(FRACTIONS) * material(MATERIAL).test_pressure_pa
     discrepancy = discrepancy_sd(summary)

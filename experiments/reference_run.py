@@ -19,6 +19,9 @@ The reference run saves its state after every chunk: run the same command again 
 
     .venv/bin/python experiments/reference_run.py /work/scratch/certified_TP --out /work/scratch/reference_TP
 
+With ``--against OTHER`` it runs nothing and compares the two existing results (OTHER's sd as the unit), for
+two runs of the same posterior made some other way (another warm-up, say).
+
 Last line: one JSON object.
 """
 
@@ -41,6 +44,15 @@ from peano_bayes.pipeline import infer
 MAX_MEAN_SD, MAX_END_SD = 0.1, 0.2
 #: The 94 % interval's ends.
 QUANTILES = (0.03, 0.97)
+
+
+def certified_warmup(summary: dict) -> int:
+    """The warm-up steps of a converged run: ``summary.json``'s ``warmup``, or for a summary written before that
+    key existed, its burn-in less the ``ceil(2 tau_max)`` steps the convergence rule discards after the warm-up."""
+    if "warmup" in summary:
+        return int(summary["warmup"])
+    conv = summary["convergence"]
+    return int(conv["discard_steps"]) - int(np.ceil(2.0 * max(conv["tau_steps"].values())))
 
 
 def draws_by_quantity(path: Path, n_ensembles: int) -> dict[str, np.ndarray]:
@@ -125,7 +137,12 @@ def certified_dataset(summary: dict) -> Path:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("certified", type=Path, help="a converged result folder (summary.json, posterior.nc)")
-    parser.add_argument("--out", type=Path, required=True, help="where the reference run writes (resumable)")
+    parser.add_argument("--out", type=Path, help="where the reference run writes (resumable)")
+    parser.add_argument(
+        "--against",
+        type=Path,
+        help="compare with this existing result folder instead of running a reference (its sd is the unit)",
+    )
     parser.add_argument("--factor", type=int, default=4, help="reference length over the certified run's")
     parser.add_argument("--seed", type=int, default=1, help="the reference's seed (not the certified run's)")
     args = parser.parse_args()
@@ -134,6 +151,26 @@ def main() -> None:
     summary = json.loads((args.certified / "summary.json").read_text())
     if not summary["convergence"]["converged"]:
         parser.error(f"{args.certified}: the run is not converged; the comparison needs a certified run")
+    if args.against is not None:
+        same = agreement(
+            draws_by_quantity(args.certified / "posterior.nc", summary["n_ensembles"]),
+            draws_by_quantity(args.against / "posterior.nc", summary["n_ensembles"]),
+        )
+        rows = same.pop("rows")
+        print(
+            json.dumps(
+                {
+                    "benchmark": "reference_run",
+                    "certified": str(args.certified),
+                    "against": str(args.against),
+                    **same,
+                    "per_quantity": rows,
+                }
+            )
+        )
+        return
+    if args.out is None:
+        parser.error("--out is required to run a reference (or give --against RESULT)")
     if args.seed == summary["seed"]:
         parser.error(f"--seed {args.seed} is the certified run's own seed; the reference needs another")
     if args.factor < 2:
@@ -148,14 +185,18 @@ def main() -> None:
     # The reference's settings, as its summary.json records them: the certified run's, with its own seed.
     sampling = dict(seed=args.seed, **{k: summary[k] for k in ("tests", "n_walkers", "n_ensembles")})
     settings = dict(sampling, sampler_coordinates=summary["sampler_coordinates"])
-    warmup = summary.get("warmup", 300)  # a summary without it was made when 300 was the default
+    warmup = certified_warmup(summary)
     enable_compilation_cache()
 
     label = f"{material}_reference"
     folder = args.out / label
     done = folder / "summary.json"
     previous = json.loads(done.read_text()) if done.exists() else None
-    if previous is not None and (previous["steps"] != length or any(previous[k] != v for k, v in settings.items())):
+    if previous is not None and (
+        previous["steps"] != length
+        or certified_warmup(previous) != warmup
+        or any(previous[k] != v for k, v in settings.items())
+    ):
         sys.exit(f"{done}: a reference of other settings or length; move it away or choose another --out")
     if previous is None:
         reference = infer(

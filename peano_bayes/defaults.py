@@ -23,15 +23,15 @@ DEFAULT_ENSEMBLES = 4
 #: Sampler steps between saved states and convergence checks.
 DEFAULT_CHUNK = 500
 #: Warm-up steps (discarded) that fit the sampler's proposal. The sampling phase's independence proposal is
-#: fitted to the warm-up's second half; 450 steps of it fit the posterior's slow directions far better than 150
-#: did, so the chain mixes faster than the longer warm-up costs (seed 0, main-job defaults, the same least-squares
-#: start: TP tau_max 23.2 -> 9.4 steps, 1619 -> 1464 steps in all; FC 40.4 -> 18.8, 2555 -> 1936; warm-up 300 ->
-#: 900; docs/validation.md, *Warm-up length*).
+#: fitted to the warm-up's second half, 450 steps here against 150 with the former 300. From the same seed and
+#: least-squares start, TP's tau_max fell 23.2 -> 9.4 steps (1619 -> 1464 steps in all) and FC's 40.4 -> 18.8
+#: (2555 -> 1936). A run now lasts at least 1400 steps (warm-up plus the first chunk), so a material that
+#: mixed fast with 300 (TFC's 851 steps) runs longer (docs/validation.md, *Warm-up length*).
 DEFAULT_WARMUP = 900
 #: What the sampler moves (:func:`peano_bayes.inference.coordinates.sampler_coordinates`): the series tensile
-#: element as its log stretches at 1 and 20 N. From the same seed and 1200 steps, against theta itself
-#: (``experiments/coordinates_arms.py``): PR tau_max 40.4 -> 22.7 steps, min bulk ESS 1082 -> 3820; FC 35.2 ->
-#: 30.0, 2490 -> 3823.
+#: element as its log stretches at 1 and 20 N. From the same seed, 1200 steps and the former 300-step warm-up,
+#: against theta itself (``experiments/coordinates_arms.py``): PR tau_max 40.4 -> 22.7 steps, min bulk ESS
+#: 1082 -> 3820; FC 35.2 -> 30.0, 2490 -> 3823.
 DEFAULT_COORDINATES = "tensile_stretch"
 #: The sampler coordinates there are (``--coordinates``).
 COORDINATE_KINDS = ("tensile_stretch", "theta")

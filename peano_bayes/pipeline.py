@@ -422,7 +422,7 @@ def infer(
         "model": choice.as_dict(),
         "seed": seed,
         "n_walkers": n_walkers,
-        "warmup": warmup,
+        "warmup": max(0, int(warmup)),
         "n_ensembles": result.n_ensembles,
         "steps": int(result.chain.shape[0]),
         "resumed_from_step": result.resumed_from,

@@ -157,8 +157,8 @@ def proposal_at(chain: np.ndarray, step: int, warmup: int) -> IndependencePropos
     """The proposal in force at ``step`` of a run with ``warmup`` steps of warm-up: fitted to the second half
     of the chain up to the end of the last warm-up round finished by then (the first half is the way in from
     the overdispersed start), or ``None`` before the first round ends. The sampling phase's proposal thus sees
-    the last half of the warm-up: on PR, 150 steps x 34 walkers gave an acceptance of 0.50 where the last
-    round's second half (50 steps) gave 0.30."""
+    the last half of the warm-up: on PR (with the former 300-step warm-up), 150 steps x 34 walkers gave an
+    acceptance of 0.50 where the last round's second half (50 steps) gave 0.30."""
     bounds = warmup_rounds(warmup)
     finished = [b for b in bounds[1:] if b <= step]
     if not finished:
@@ -449,9 +449,10 @@ def sample(
         saved.setdefault("n_ensembles", 1)
         saved.setdefault("coordinates", {"kind": "theta"})
         if any(saved.get(k) != v for k, v in meta.items()):
+            was = {k: saved.get(k, "unrecorded") for k in ("n_walkers", "seed", "warmup")}
             raise PeanoBayesInputError(
-                f"{state_path}: saved state is of another run: it was written with {saved.get('n_walkers')} walkers, "
-                f"{saved['n_ensembles']} ensemble(s), seed {saved.get('seed')}, --warmup {saved.get('warmup')} and "
+                f"{state_path}: saved state is of another run: it was written with {was['n_walkers']} walkers, "
+                f"{saved['n_ensembles']} ensemble(s), seed {was['seed']}, --warmup {was['warmup']} and "
                 f"--coordinates {saved['coordinates']['kind']}, and one of these or the sampled parameters differ "
                 "now; give the same options to resume it, else delete it or run without --resume"
             )
