@@ -422,7 +422,7 @@ def infer(
         "model": choice.as_dict(),
         "seed": seed,
         "n_walkers": n_walkers,
-        "warmup": max(0, int(warmup)),
+        "warmup": result.warmup,
         "n_ensembles": result.n_ensembles,
         "steps": int(result.chain.shape[0]),
         "resumed_from_step": result.resumed_from,
@@ -571,6 +571,22 @@ def _with_unit(x, unit: str) -> str:
     return f"{format_number(x)} {unit}" if _finite(x) else ""
 
 
+def _sampler_run(summary: dict) -> str:
+    """`` (W warm-up, tau_max T steps, discard D)`` for one material's index line: the sampler's warm-up and
+    the largest integrated autocorrelation time, so a reader sees how hard the posterior was to sample; empty
+    parts are left out for summaries written before they were recorded."""
+    conv = summary["convergence"]
+    parts = []
+    if summary.get("warmup") is not None:
+        parts.append(f"{summary['warmup']} warm-up")
+    taus = [t for t in conv.get("tau_steps", {}).values() if _finite(t)]
+    if taus:
+        parts.append(f"tau_max {max(taus):.1f} steps")
+    if conv.get("discard_steps") is not None:
+        parts.append(f"first {conv['discard_steps']} discarded")
+    return f" ({', '.join(parts)})" if parts else ""
+
+
 def index_markdown(
     summaries: list[dict],
     metrics: dict | None = None,
@@ -597,8 +613,8 @@ def index_markdown(
             f"## {s['material']}",
             "",
             f"Data: `{shown_dataset_path(s['dataset'])}` ({', '.join(s['tests'])}); "
-            f"{s.get('n_ensembles', 1)} ensembles of {s['n_walkers']} walkers x {s['steps']} steps; "
-            f"{verdict}. Max R-hat {max(conv['rhat'].values()):.3f}, "
+            f"{s.get('n_ensembles', 1)} ensembles of {s['n_walkers']} walkers x {s['steps']} steps"
+            f"{_sampler_run(s)}; {verdict}. Max R-hat {max(conv['rhat'].values()):.3f}, "
             f"min bulk ESS {min(conv['ess_bulk'].values()):.0f}, "
             f"chain {conv['tau_lengths']:.0f} autocorrelation times long.",
             "",

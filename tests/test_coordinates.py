@@ -100,7 +100,8 @@ def test_a_resume_refuses_a_state_written_in_other_coordinates_and_says_which(tm
     target, state = _GaussianInTheta(mean), tmp_path / "state.npz"
     options = dict(n_walkers=16, seed=5, warmup=10, max_steps=20, progress=False, log=lambda m: None)
     sample(target, mean, 0.01 * np.eye(3), state_path=state, **options)
-    with pytest.raises(PeanoBayesInputError, match="--coordinates theta, and one of these"):
+    says = r"another run: --coordinates: saved theta, now tensile_stretch \(forces \["
+    with pytest.raises(PeanoBayesInputError, match=says):
         sample(target, mean, 0.01 * np.eye(3), state_path=state, resume=True, coordinates=coords, **options)
     resumed = sample(target, mean, 0.01 * np.eye(3), state_path=state, resume=True, **options)
     assert resumed.resumed_from == 20

@@ -54,7 +54,10 @@ def _summary(contraction):
 
 def test_results_page_shows_population_new_specimen_and_weakly_informed_parameters():
     page = index_markdown([_summary(0.2)])
-    assert "4 ensembles of 32 walkers x 2000 steps" in page
+    assert "4 ensembles of 32 walkers x 2000 steps; converged" in page  # an old summary: no warm-up, no tau
+    sampled = {**_summary(0.2), "warmup": 900}
+    sampled["convergence"] = {**sampled["convergence"], "tau_steps": {"a": 12.34, "b": 31.0}, "discard_steps": 962}
+    assert "x 2000 steps (900 warm-up, tau_max 31.0 steps, first 962 discarded); converged" in index_markdown([sampled])
     assert "| tensile_ka_n_per_m | N/m | 500 | 480 to 520 | 450 to 560 | 0.99 | 1.002 | 3000 |" in page
     assert "**Posterior close to its prior** (contraction below 0.5): specimen_log_sd." in page
     assert "close to its prior" not in index_markdown([_summary(0.8)])

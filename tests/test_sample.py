@@ -174,6 +174,7 @@ def test_a_step_limit_inside_the_warmup_says_so():
     assert result.chain.shape == (100, 4 * 8, 3)  # four ensembles of eight walkers
     assert not result.convergence.converged
     assert "inside the warm-up" in result.convergence.problems[0]
+    assert result.warmup == 300  # the run's own warm-up, what summary.json records
 
 
 def test_step_limit_gives_an_unconverged_result_that_says_why():
@@ -238,11 +239,14 @@ def test_resume_refuses_a_state_of_another_run(tmp_path):
     g = Gaussian()
     kw = dict(n_walkers=8, chunk=20, state_path=tmp_path / "state.npz", progress=False, log=lambda m: None)
     sample(g, g.mean, 0.05 * np.eye(3), seed=1, warmup=10, max_steps=20, **kw)
-    with pytest.raises(PeanoBayesInputError, match="another run"):
+    with pytest.raises(PeanoBayesInputError, match="another run: seed: saved 1, now 2; give") as err:
         sample(g, g.mean, 0.05 * np.eye(3), seed=2, warmup=10, max_steps=40, resume=True, **kw)
+    assert "--warmup" not in str(err.value)  # only what differs is named
     # Another warm-up is another run too, and the message gives the saved one (the default changed once).
-    with pytest.raises(PeanoBayesInputError, match="seed 1, --warmup 10 and"):
+    with pytest.raises(PeanoBayesInputError, match="another run: --warmup: saved 10, now 20; give"):
         sample(g, g.mean, 0.05 * np.eye(3), seed=1, warmup=20, max_steps=40, resume=True, **kw)
+    with pytest.raises(PeanoBayesInputError, match="walkers per ensemble: saved 8, now 10; seed: saved 1, now 3"):
+        sample(g, g.mean, 0.05 * np.eye(3), seed=3, warmup=10, max_steps=40, resume=True, **{**kw, "n_walkers": 10})
 
 
 def test_too_few_walkers_for_the_dimension_is_an_input_error():

@@ -206,7 +206,7 @@ class SampleResult:
     """``chain`` (steps, walkers, D) theta, the ensembles' walkers side by side (ensemble ``e`` holds walkers
     ``e W`` to ``(e + 1) W - 1``); ``log_prob`` (steps, walkers); ``convergence``; ``names``; ``seconds`` of
     sampling (this process, compile included); ``acceptance`` mean fraction; ``resumed_from`` steps loaded from
-    the state file (0 for a fresh run); ``n_ensembles``."""
+    the state file (0 for a fresh run); ``n_ensembles``; ``warmup`` steps of warm-up the run used."""
 
     names: tuple[str, ...]
     chain: np.ndarray
@@ -217,6 +217,7 @@ class SampleResult:
     resumed_from: int = 0
     chunks: list = field(default_factory=list)
     n_ensembles: int = 1
+    warmup: int = 0
 
     def kept(self) -> np.ndarray:
         """(walkers, draws, D) after burn-in."""
@@ -354,6 +355,42 @@ def _rng_from_json(data) -> tuple:
     return (name, np.asarray(keys, dtype=np.uint32), pos, has_gauss, cached)
 
 
+#: How a resume mismatch names each key of a state file's metadata.
+_STATE_KEYS = {
+    "n_walkers": "walkers per ensemble",
+    "n_ensembles": "ensembles",
+    "seed": "seed",
+    "warmup": "--warmup",
+    "coordinates": "--coordinates",
+    "names": "sampled parameters",
+}
+
+
+def _differences(saved: dict, now: dict) -> list[str]:
+    """The keys of a state file's metadata that differ from this run's, each as ``what: saved X, now Y``."""
+
+    def show(key, value):
+        if value is None:
+            return "unrecorded"
+        if key == "coordinates":
+            forces = value.get("forces_n")
+            return value.get("kind", "?") + (f" (forces {forces} N)" if forces else "")
+        return str(value)
+
+    out = []
+    for key, label in _STATE_KEYS.items():
+        was, is_ = saved.get(key), now[key]
+        if was == is_:
+            continue
+        if key == "names" and was is not None:
+            gone, new = [n for n in was if n not in is_], [n for n in is_ if n not in was]
+            parts = [f"only saved: {', '.join(gone)}" if gone else "", f"only now: {', '.join(new)}" if new else ""]
+            out.append(f"{label}: {'; '.join(p for p in parts if p) or 'same names in another order'}")
+        else:
+            out.append(f"{label}: saved {show(key, was)}, now {show(key, is_)}")
+    return out
+
+
 def load_state(path: str | os.PathLike):
     """``(chain, log_prob, random_states, meta)`` from a state file written by :func:`sample`; one random
     state per ensemble."""
@@ -448,13 +485,11 @@ def sample(
         chain, lps, rng_states, saved = load_state(state_path)
         saved.setdefault("n_ensembles", 1)
         saved.setdefault("coordinates", {"kind": "theta"})
-        if any(saved.get(k) != v for k, v in meta.items()):
-            was = {k: saved.get(k, "unrecorded") for k in ("n_walkers", "seed", "warmup")}
+        differ = _differences(saved, meta)
+        if differ:
             raise PeanoBayesInputError(
-                f"{state_path}: saved state is of another run: it was written with {was['n_walkers']} walkers, "
-                f"{saved['n_ensembles']} ensemble(s), seed {was['seed']}, --warmup {was['warmup']} and "
-                f"--coordinates {saved['coordinates']['kind']}, and one of these or the sampled parameters differ "
-                "now; give the same options to resume it, else delete it or run without --resume"
+                f"{state_path}: saved state is of another run: {'; '.join(differ)}; give the same options to "
+                "resume it, else delete it or run without --resume"
             )
         states = [
             emcee.State(chain[-1, e * per : (e + 1) * per], log_prob=lps[-1, e * per : (e + 1) * per], random_state=r)
@@ -548,6 +583,7 @@ def sample(
         resumed_from,
         chunks,
         n_ensembles,
+        warmup,
     )
 
 
