@@ -572,9 +572,10 @@ def _with_unit(x, unit: str) -> str:
 
 
 def _sampler_run(summary: dict) -> str:
-    """`` (W warm-up, tau_max T steps, discard D)`` for one material's index line: the sampler's warm-up and
-    the largest integrated autocorrelation time, so a reader sees how hard the posterior was to sample; empty
-    parts are left out for summaries written before they were recorded."""
+    """`` (W warm-up, tau_max T steps, first D discarded)`` for one material's index line: the sampler's warm-up,
+    the largest integrated autocorrelation time (so a reader sees how hard the posterior was to sample) and the
+    burn-in D counted from the chain's first step (the warm-up and a further ``2 tau_max``); parts a summary
+    written before they were recorded lacks are left out."""
     conv = summary["convergence"]
     parts = []
     if summary.get("warmup") is not None:

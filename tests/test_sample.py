@@ -239,14 +239,38 @@ def test_resume_refuses_a_state_of_another_run(tmp_path):
     g = Gaussian()
     kw = dict(n_walkers=8, chunk=20, state_path=tmp_path / "state.npz", progress=False, log=lambda m: None)
     sample(g, g.mean, 0.05 * np.eye(3), seed=1, warmup=10, max_steps=20, **kw)
-    with pytest.raises(PeanoBayesInputError, match="another run: seed: saved 1, now 2; give") as err:
+    with pytest.raises(PeanoBayesInputError, match="another run: --seed: saved 1, now 2; give") as err:
         sample(g, g.mean, 0.05 * np.eye(3), seed=2, warmup=10, max_steps=40, resume=True, **kw)
     assert "--warmup" not in str(err.value)  # only what differs is named
     # Another warm-up is another run too, and the message gives the saved one (the default changed once).
     with pytest.raises(PeanoBayesInputError, match="another run: --warmup: saved 10, now 20; give"):
         sample(g, g.mean, 0.05 * np.eye(3), seed=1, warmup=20, max_steps=40, resume=True, **kw)
-    with pytest.raises(PeanoBayesInputError, match="walkers per ensemble: saved 8, now 10; seed: saved 1, now 3"):
+    with pytest.raises(
+        PeanoBayesInputError, match=r"--walkers \(per ensemble\): saved 8, now 10; --seed: saved 1, now 3"
+    ):
         sample(g, g.mean, 0.05 * np.eye(3), seed=3, warmup=10, max_steps=40, resume=True, **{**kw, "n_walkers": 10})
+
+
+def test_a_resume_mismatch_names_the_parameters_only_one_side_has_and_what_an_old_state_lacks():
+    from peano_bayes.inference.sample import _differences
+
+    now = {"names": ["a", "b", "c"], "n_walkers": 8, "seed": 0, "warmup": 900, "coordinates": {"kind": "theta"}}
+    assert _differences(dict(now), now) == []
+    assert _differences({**now, "names": ["a", "d"]}, now) == ["sampled parameters: only saved: d; only now: b, c"]
+    assert _differences({**now, "names": ["c", "b", "a"]}, now) == [
+        "sampled parameters: the same names in another order"
+    ]
+    old = {k: v for k, v in now.items() if k not in ("warmup", "names")}  # written before these were recorded
+    assert _differences(old, now) == [
+        "sampled parameters: unrecorded in the saved state",
+        "--warmup: saved unrecorded, now 900",
+    ]
+    # Coordinates that print alike but differ are shown whole; a key without a label is named as itself.
+    shifted = {**now, "coordinates": {"kind": "theta", "scale": 2}, "chunk": 5}
+    assert _differences({**now, "chunk": 4}, shifted) == [
+        "--coordinates: saved {'kind': 'theta'}, now {'kind': 'theta', 'scale': 2}",
+        "chunk: saved 4, now 5",
+    ]
 
 
 def test_too_few_walkers_for_the_dimension_is_an_input_error():

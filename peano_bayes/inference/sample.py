@@ -355,11 +355,11 @@ def _rng_from_json(data) -> tuple:
     return (name, np.asarray(keys, dtype=np.uint32), pos, has_gauss, cached)
 
 
-#: How a resume mismatch names each key of a state file's metadata.
+#: How a resume mismatch names each key of a state file's metadata (a key not listed here is named as itself).
 _STATE_KEYS = {
-    "n_walkers": "walkers per ensemble",
-    "n_ensembles": "ensembles",
-    "seed": "seed",
+    "n_walkers": "--walkers (per ensemble)",
+    "n_ensembles": "--ensembles",
+    "seed": "--seed",
     "warmup": "--warmup",
     "coordinates": "--coordinates",
     "names": "sampled parameters",
@@ -367,27 +367,33 @@ _STATE_KEYS = {
 
 
 def _differences(saved: dict, now: dict) -> list[str]:
-    """The keys of a state file's metadata that differ from this run's, each as ``what: saved X, now Y``."""
+    """The keys of ``now`` (this run's metadata) whose value in ``saved`` (a state file's) differs, each as
+    ``option: saved X, now Y``; for the sampled parameters, the names only one side has."""
 
     def show(key, value):
         if value is None:
             return "unrecorded"
-        if key == "coordinates":
+        if key == "coordinates" and isinstance(value, dict):
             forces = value.get("forces_n")
             return value.get("kind", "?") + (f" (forces {forces} N)" if forces else "")
         return str(value)
 
     out = []
-    for key, label in _STATE_KEYS.items():
-        was, is_ = saved.get(key), now[key]
+    for key, is_ in now.items():
+        was, label = saved.get(key), _STATE_KEYS.get(key, key)
         if was == is_:
             continue
         if key == "names" and was is not None:
             gone, new = [n for n in was if n not in is_], [n for n in is_ if n not in was]
             parts = [f"only saved: {', '.join(gone)}" if gone else "", f"only now: {', '.join(new)}" if new else ""]
-            out.append(f"{label}: {'; '.join(p for p in parts if p) or 'same names in another order'}")
+            out.append(f"{label}: {'; '.join(p for p in parts if p) or 'the same names in another order'}")
+        elif key == "names":
+            out.append(f"{label}: unrecorded in the saved state")
         else:
-            out.append(f"{label}: saved {show(key, was)}, now {show(key, is_)}")
+            saved_text, now_text = show(key, was), show(key, is_)
+            if saved_text == now_text:  # a difference the short form hides
+                saved_text, now_text = str(was), str(is_)
+            out.append(f"{label}: saved {saved_text}, now {now_text}")
     return out
 
 
