@@ -62,7 +62,8 @@ def rebuild(result: Path):
         raise SystemExit(f"{result}: made with discovery's additions; this script rebuilds the configured model only")
     prior = whole_prior.for_config(config)
     posterior = build_posterior(prepare(dataset), prior, config=config, held=DEFAULT_HELD)
-    if NonCentred.of(posterior) is None:
+    nc = NonCentred.of(posterior)
+    if nc is None:
         raise SystemExit(f"{result}: one specimen; this script measures the non-centred posterior of several")
     if list(posterior.names) != list(summary["convergence"]["rhat"]):
         raise SystemExit(f"{result}: its sampled parameters differ from the rebuilt posterior's")
@@ -71,8 +72,8 @@ def rebuild(result: Path):
     exact = posterior_mode(posterior, centre, covariance)
     posterior = posterior.with_input_error_at(exact.mode)
     posterior = posterior.with_residual_lag1(posterior.residual_lag1_at(exact.mode))
-    laplace = refine_mode(posterior.batched, exact, coordinates=NonCentred.of(posterior))
-    return summary, posterior, laplace, NonCentred.of(posterior)
+    laplace = refine_mode(posterior.batched, exact, coordinates=nc)
+    return summary, posterior, laplace, nc
 
 
 def main(argv=None) -> int:
