@@ -34,11 +34,11 @@ import numpy as np
 from peano_bayes import enable_compilation_cache
 from peano_bayes.bundled import dataset_path
 from peano_bayes.data import load
-from peano_bayes.inference.laplace import NonCentred, _in_eta, posterior_mode, refine_mode
+from peano_bayes.inference.laplace import NonCentred, _in_eta
 from peano_bayes.inference.likelihood import prepare
 from peano_bayes.inference.posterior import DEFAULT_HELD, build_posterior
 from peano_bayes.inference.sample import IndependenceProposal
-from peano_bayes.pipeline import prior_of, select_tests, walker_start
+from peano_bayes.pipeline import posterior_at_mode, prior_of, select_tests, walker_start
 
 
 def t_draws(rng, proposal: IndependenceProposal, n: int):
@@ -68,12 +68,8 @@ def rebuild(result: Path):
     if list(posterior.names) != list(summary["convergence"]["rhat"]):
         raise SystemExit(f"{result}: its sampled parameters differ from the rebuilt posterior's")
     centre, covariance = walker_start(posterior, fitted)
-    posterior = posterior.with_batch_rows(max(1, summary["n_walkers"] // 2))
-    exact = posterior_mode(posterior, centre, covariance)
-    posterior = posterior.with_input_error_at(exact.mode)
-    posterior = posterior.with_residual_lag1(posterior.residual_lag1_at(exact.mode))
-    laplace = refine_mode(posterior.batched, exact, coordinates=nc)
-    return summary, posterior, laplace, nc
+    start = posterior_at_mode(posterior.with_batch_rows(max(1, summary["n_walkers"] // 2)), centre, covariance)
+    return summary, start.posterior, start.laplace, nc
 
 
 def main(argv=None) -> int:

@@ -35,7 +35,7 @@ from .errors import PeanoBayesInputError
 from .formatting import format_number
 from .inference.coordinates import sampler_coordinates
 from .inference.fit import fit, fit_quality, predictions, residual_correlation, sensor_noise
-from .inference.laplace import NonCentred, posterior_mode, refine_mode
+from .inference.laplace import Laplace, NonCentred, posterior_mode, refine_mode
 from .inference.likelihood import prepare
 from .inference.posterior import CONTRAST_PREFIX, DEFAULT_HELD, SPECIMEN_SD, build_posterior
 from .inference.priors import load_prior
@@ -171,6 +171,61 @@ def walker_start(posterior, fitted: dict) -> tuple[np.ndarray, np.ndarray]:
         elif n.startswith(CONTRAST_PREFIX):
             cov[i, i] = 0.02**2
     return centre, cov
+
+
+@dataclasses.dataclass(frozen=True)
+class ModeStart:
+    """Where sampling starts (:func:`posterior_at_mode`). ``posterior``: the posterior the sampler explores (the
+    driving inputs' error linearised at ``exact.mode``, AR(1) residuals where the residuals there are correlated);
+    ``exact``: its mode with the driving inputs taken as exact; ``laplace``: the mode and covariance on the full
+    likelihood (theta, (D,) and (D, D)); ``lag1``: test -> lag-1 residual correlation at ``exact.mode``, for the
+    tests sampled with AR(1) residuals; ``compile_s``: seconds to compile the batched log posterior."""
+
+    posterior: object
+    exact: Laplace
+    laplace: Laplace
+    lag1: dict
+    compile_s: float
+
+
+def posterior_at_mode(posterior, centre: np.ndarray, covariance: np.ndarray, *, log=lambda message: None):
+    """From the least-squares start (``centre`` (D,), ``covariance`` (D, D), theta: :func:`walker_start`) to the
+    posterior the sampler explores and its Laplace approximation, a :class:`ModeStart`.
+
+    BFGS first finds the mode with the driving inputs taken as exact (:func:`~peano_bayes.inference.laplace.
+    posterior_mode`); the fitted inputs' error is linearised there once, and a test whose residuals there are
+    correlated from bin to bin is given AR(1) residuals of that correlation; the mode is then refined on that full
+    likelihood (:func:`~peano_bayes.inference.laplace.refine_mode`, in non-centred coordinates where there are
+    specimen contrasts). ``posterior`` batched as the sampler will call it (``with_batch_rows``), so one
+    compilation serves the refinement and the sampler. ``log`` receives one line per stage."""
+    log("posterior mode (BFGS) from the least-squares point ...")
+    exact = posterior_mode(posterior, centre, covariance)
+    log(
+        f"mode with exact inputs found in {exact.steps} steps, {exact.seconds:.1f} s, log posterior "
+        f"{exact.log_prob:.1f}" + (f" ({exact.status})" if exact.status else "")
+    )
+    posterior = posterior.with_input_error_at(exact.mode)
+    lag1 = posterior.residual_lag1_at(exact.mode)
+    posterior = posterior.with_residual_lag1(lag1)
+    _log_lags(posterior, lag1, log)
+    t0 = time.perf_counter()
+    posterior.batched(np.tile(centre, (posterior.batch_rows or 1, 1)))
+    compile_s = time.perf_counter() - t0
+    laplace = refine_mode(posterior.batched, exact, coordinates=NonCentred.of(posterior))
+    log(
+        f"mode on the full likelihood in {laplace.steps} steps, {laplace.seconds:.1f} s, log posterior "
+        f"{laplace.log_prob:.1f}" + (f" ({laplace.status})" if laplace.status else "")
+    )
+    return ModeStart(posterior, exact, laplace, lag1, compile_s)
+
+
+def _log_lags(posterior, lag1: dict, log) -> None:
+    for test, rho in lag1.items():
+        log(
+            f"the {test} residuals at the mode are correlated from bin to bin (lag-1 {rho:.2f}): the model "
+            f"misses structure in these data; they are sampled as AR(1) residuals with lag-1 "
+            f"{posterior.residual_lag1[test]:.2f}, so neighbouring bins no longer count as independent evidence"
+        )
 
 
 def _linearisation_point(path: Path, state_path: Path, posterior) -> tuple[np.ndarray, dict]:
@@ -320,44 +375,22 @@ def infer(
     # also serves the mode's refinement on the full likelihood.
     rows = max(1, n_walkers // 2)
     posterior = posterior.with_batch_rows(rows)
-    laplace = None
-    if not (resume and state_path.exists()):  # a resumed run restores its walkers and needs no start
-        log(f"{code}: posterior mode (BFGS) from the least-squares point ...")
-        laplace = posterior_mode(posterior, centre, covariance)
-        log(
-            f"{code}: mode with exact inputs found in {laplace.steps} steps, {laplace.seconds:.1f} s, log posterior "
-            f"{laplace.log_prob:.1f}" + (f" ({laplace.status})" if laplace.status else "")
-        )
-    # The fitted inputs' error is linearised once, at the exact-input mode (Posterior.with_input_error_at); a test
-    # whose residuals there are correlated from bin to bin (a misfit with structure) is sampled with AR(1)
-    # residuals of that correlation. A resumed run reads both back, so it samples the same posterior.
-    if laplace is not None:
-        posterior = posterior.with_input_error_at(laplace.mode)
-        lag1 = posterior.residual_lag1_at(laplace.mode)
-        record = {"names": list(posterior.names), "theta": laplace.mode.tolist(), "residual_lag1": lag1}
-        write_text(linearised_path, json.dumps(record))
-    else:
+    start = None
+    if resume and state_path.exists():  # a resumed run restores its walkers and needs no start
+        # It reads back where its inputs' error was linearised and its AR(1) lags, so it samples the same posterior.
         point, lag1 = _linearisation_point(linearised_path, state_path, posterior)
-        posterior = posterior.with_input_error_at(point)
-    posterior = posterior.with_residual_lag1(lag1)
-    for test, rho in lag1.items():
-        log(
-            f"{code}: the {test} residuals at the mode are correlated from bin to bin (lag-1 {rho:.2f}): the model "
-            f"misses structure in these data; they are sampled as AR(1) residuals with lag-1 "
-            f"{posterior.residual_lag1[test]:.2f}, so neighbouring bins no longer count as independent evidence"
-        )
-    t0 = time.perf_counter()
-    posterior.batched(np.tile(centre, (rows, 1)))
-    timings["compile_s"] = time.perf_counter() - t0
-    if laplace is not None:
-        exact = laplace
-        laplace = refine_mode(posterior.batched, exact, coordinates=NonCentred.of(posterior))
-        centre, covariance = laplace.mode, laplace.covariance
-        timings["mode_s"] = exact.seconds + laplace.seconds
-        log(
-            f"{code}: mode on the full likelihood in {laplace.steps} steps, {laplace.seconds:.1f} s, log posterior "
-            f"{laplace.log_prob:.1f}" + (f" ({laplace.status})" if laplace.status else "")
-        )
+        posterior = posterior.with_input_error_at(point).with_residual_lag1(lag1)
+        _log_lags(posterior, lag1, lambda m: log(f"{code}: {m}"))
+        t0 = time.perf_counter()
+        posterior.batched(np.tile(centre, (rows, 1)))
+        timings["compile_s"] = time.perf_counter() - t0
+    else:
+        start = posterior_at_mode(posterior, centre, covariance, log=lambda m: log(f"{code}: {m}"))
+        posterior, centre, covariance = start.posterior, start.laplace.mode, start.laplace.covariance
+        record = {"names": list(posterior.names), "theta": start.exact.mode.tolist(), "residual_lag1": start.lag1}
+        write_text(linearised_path, json.dumps(record))
+        timings["compile_s"] = start.compile_s
+        timings["mode_s"] = start.exact.seconds + start.laplace.seconds
     sampler = sampler_coordinates(posterior, coordinates)
     result = sample(
         posterior,
@@ -458,12 +491,16 @@ def infer(
             k: fitted.get(k) for k in ("cost", "n_starts", "n_failed", "n_step_limit", "converged", "rounds", "params")
         },
         "posterior_mode": None
-        if laplace is None
+        if start is None
         else {
-            "log_prob": laplace.log_prob,
-            "steps": laplace.steps,
-            "status": laplace.status or "successful",
-            "exact_inputs": {"log_prob": exact.log_prob, "steps": exact.steps, "status": exact.status or "successful"},
+            "log_prob": start.laplace.log_prob,
+            "steps": start.laplace.steps,
+            "status": start.laplace.status or "successful",
+            "exact_inputs": {
+                "log_prob": start.exact.log_prob,
+                "steps": start.exact.steps,
+                "status": start.exact.status or "successful",
+            },
         },
         "timings_s": timings,
     }
