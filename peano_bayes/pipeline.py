@@ -13,6 +13,7 @@ import dataclasses
 import json
 import math
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -37,7 +38,7 @@ from .inference.coordinates import sampler_coordinates
 from .inference.fit import fit, fit_quality, predictions, residual_correlation, sensor_noise
 from .inference.laplace import Laplace, NonCentred, posterior_mode, refine_mode
 from .inference.likelihood import prepare
-from .inference.posterior import CONTRAST_PREFIX, DEFAULT_HELD, SPECIMEN_SD, build_posterior
+from .inference.posterior import CONTRAST_PREFIX, DEFAULT_HELD, SPECIMEN_SD, Posterior, build_posterior
 from .inference.priors import load_prior
 from .inference.results import (
     NEW_SPECIMEN_PREFIX,
@@ -175,29 +176,38 @@ def walker_start(posterior, fitted: dict) -> tuple[np.ndarray, np.ndarray]:
 
 @dataclasses.dataclass(frozen=True)
 class ModeStart:
-    """Where sampling starts (:func:`posterior_at_mode`). ``posterior``: the posterior the sampler explores (the
-    driving inputs' error linearised at ``exact.mode``, AR(1) residuals where the residuals there are correlated);
-    ``exact``: its mode with the driving inputs taken as exact; ``laplace``: the mode and covariance on the full
-    likelihood (theta, (D,) and (D, D)); ``lag1``: test -> lag-1 residual correlation at ``exact.mode``, for the
-    tests sampled with AR(1) residuals; ``compile_s``: seconds to compile the batched log posterior."""
+    """Where sampling starts (:func:`posterior_at_mode`).
 
-    posterior: object
+    ``posterior``: the posterior the sampler explores: the driving inputs' error linearised at ``exact.mode``, and
+    AR(1) residuals for the tests whose residuals there are correlated from bin to bin. ``exact``: the mode of the
+    posterior given to :func:`posterior_at_mode`, with the driving inputs taken as exact (``mode`` (D,) theta).
+    ``laplace``: the mode and covariance ((D,), (D, D) theta) of ``posterior``, on the full likelihood.
+    ``lag1``: test -> lag-1 residual correlation measured at ``exact.mode`` (``posterior.residual_lag1`` holds
+    what the likelihood uses, which may be bounded). ``compile_s``: wall seconds of the first batched
+    evaluation, compilation included."""
+
+    posterior: Posterior
     exact: Laplace
     laplace: Laplace
-    lag1: dict
+    lag1: dict[str, float]
     compile_s: float
 
 
-def posterior_at_mode(posterior, centre: np.ndarray, covariance: np.ndarray, *, log=lambda message: None):
+def posterior_at_mode(
+    posterior: Posterior, centre: np.ndarray, covariance: np.ndarray, *, log: Callable[[str], None] = lambda m: None
+) -> ModeStart:
     """From the least-squares start (``centre`` (D,), ``covariance`` (D, D), theta: :func:`walker_start`) to the
-    posterior the sampler explores and its Laplace approximation, a :class:`ModeStart`.
+    posterior the sampler explores and its Laplace approximation.
 
     BFGS first finds the mode with the driving inputs taken as exact (:func:`~peano_bayes.inference.laplace.
     posterior_mode`); the fitted inputs' error is linearised there once, and a test whose residuals there are
     correlated from bin to bin is given AR(1) residuals of that correlation; the mode is then refined on that full
     likelihood (:func:`~peano_bayes.inference.laplace.refine_mode`, in non-centred coordinates where there are
-    specimen contrasts). ``posterior`` batched as the sampler will call it (``with_batch_rows``), so one
-    compilation serves the refinement and the sampler. ``log`` receives one line per stage."""
+    specimen contrasts). ``posterior`` must already evaluate batches in the sampler's calls
+    (``with_batch_rows``), so one compilation serves the refinement and the sampler. ``log`` receives one line per
+    stage."""
+    if posterior.batch_rows is None:
+        raise ValueError("posterior_at_mode: give the posterior its batch size first (Posterior.with_batch_rows)")
     log("posterior mode (BFGS) from the least-squares point ...")
     exact = posterior_mode(posterior, centre, covariance)
     log(
@@ -209,7 +219,7 @@ def posterior_at_mode(posterior, centre: np.ndarray, covariance: np.ndarray, *, 
     posterior = posterior.with_residual_lag1(lag1)
     _log_lags(posterior, lag1, log)
     t0 = time.perf_counter()
-    posterior.batched(np.tile(centre, (posterior.batch_rows or 1, 1)))
+    posterior.batched(np.tile(centre, (posterior.batch_rows, 1)))
     compile_s = time.perf_counter() - t0
     laplace = refine_mode(posterior.batched, exact, coordinates=NonCentred.of(posterior))
     log(
@@ -1009,6 +1019,7 @@ def fit_many(
 
 
 __all__ = [
+    "ModeStart",
     "RunLog",
     "shown_dataset_path",
     "ALL_TESTS",
@@ -1019,6 +1030,7 @@ __all__ = [
     "index_markdown",
     "infer",
     "least_squares",
+    "posterior_at_mode",
     "prior_of",
     "reference_models",
     "report_results",
