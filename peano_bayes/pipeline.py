@@ -210,23 +210,29 @@ def posterior_at_mode(
         raise ValueError("posterior_at_mode: give the posterior its batch size first (Posterior.with_batch_rows)")
     log("posterior mode (BFGS) from the least-squares point ...")
     exact = posterior_mode(posterior, centre, covariance)
-    log(
-        f"mode with exact inputs found in {exact.steps} steps, {exact.seconds:.1f} s, log posterior "
-        f"{exact.log_prob:.1f}" + (f" ({exact.status})" if exact.status else "")
-    )
+    log(_mode_line("mode with exact inputs found in", exact))
     posterior = posterior.with_input_error_at(exact.mode)
     lag1 = posterior.residual_lag1_at(exact.mode)
     posterior = posterior.with_residual_lag1(lag1)
     _log_lags(posterior, lag1, log)
-    t0 = time.perf_counter()
-    posterior.batched(np.tile(centre, (posterior.batch_rows, 1)))
-    compile_s = time.perf_counter() - t0
+    compile_s = _first_call_seconds(posterior, centre)
     laplace = refine_mode(posterior.batched, exact, coordinates=NonCentred.of(posterior))
-    log(
-        f"mode on the full likelihood in {laplace.steps} steps, {laplace.seconds:.1f} s, log posterior "
-        f"{laplace.log_prob:.1f}" + (f" ({laplace.status})" if laplace.status else "")
-    )
+    log(_mode_line("mode on the full likelihood in", laplace))
     return ModeStart(posterior, exact, laplace, lag1, compile_s)
+
+
+def _mode_line(what: str, laplace: Laplace) -> str:
+    return f"{what} {laplace.steps} steps, {laplace.seconds:.1f} s, log posterior {laplace.log_prob:.1f}" + (
+        f" ({laplace.status})" if laplace.status else ""
+    )
+
+
+def _first_call_seconds(posterior: Posterior, theta: np.ndarray) -> float:
+    """Wall seconds of one batched evaluation at ``theta`` (D,) repeated ``batch_rows`` times: on a fresh
+    posterior, its compilation (or load from the persistent cache)."""
+    t0 = time.perf_counter()
+    posterior.batched(np.tile(theta, (posterior.batch_rows, 1)))
+    return time.perf_counter() - t0
 
 
 def _log_lags(posterior, lag1: dict, log) -> None:
@@ -391,9 +397,7 @@ def infer(
         point, lag1 = _linearisation_point(linearised_path, state_path, posterior)
         posterior = posterior.with_input_error_at(point).with_residual_lag1(lag1)
         _log_lags(posterior, lag1, lambda m: log(f"{code}: {m}"))
-        t0 = time.perf_counter()
-        posterior.batched(np.tile(centre, (rows, 1)))
-        timings["compile_s"] = time.perf_counter() - t0
+        timings["compile_s"] = _first_call_seconds(posterior, centre)
     else:
         start = posterior_at_mode(posterior, centre, covariance, log=lambda m: log(f"{code}: {m}"))
         posterior, centre, covariance = start.posterior, start.laplace.mode, start.laplace.covariance
