@@ -4,9 +4,10 @@ and in how many rounds, how many starts failed or stopped at the step limit, the
 The fits are the ones ``peano-bayes fit`` and ``run`` make (:func:`peano_bayes.pipeline.least_squares` on the
 default tests, the bundled prior of the material, 16 starts, seed 0). Datasets: the bundled files
 (``--materials``), and with ``--user-like`` a file such as a user's rig gives: FC's generating values tested at
-1200 kPa (forces to about 230 N), sampled at 10 Hz, two specimens, three repeats, the rig's noise.
+1200 kPa (forces to about 230 N; ``--user-like-kpa 2800``: about 300 N), sampled at 10 Hz, two specimens, three
+repeats, the rig's noise.
 
-    python experiments/bench_least_squares.py [--materials TP PR ...] [--user-like]
+    python experiments/bench_least_squares.py [--materials TP PR ...] [--user-like [--user-like-kpa 2800]]
 
 The last line printed is one JSON object.
 """
@@ -33,14 +34,20 @@ USER_LIKE_PRESSURE_PA = 1200e3
 USER_LIKE_RATE_HZ = 10.0
 
 
-def user_like_dataset() -> Dataset:
-    """FC's generating values at 1200 kPa and 10 Hz: a high-force file unlike the bundled ones."""
-    provenance = load(dataset_path("FC")).provenance  # the generating values and model of the bundled file
+def user_like_dataset(
+    pressure_pa: float = USER_LIKE_PRESSURE_PA, code: str = "FC", specimen_spread: float = 0.05
+) -> Dataset:
+    """The generating values of bundled material ``code`` at ``pressure_pa`` [Pa] and 10 Hz, two specimens
+    whose stiffnesses differ by the log-normal ``specimen_spread`` (the rig's 0.05 by default): a high-force
+    file unlike the bundled ones."""
+    provenance = load(dataset_path(code)).provenance  # the generating values and model of the bundled file
     params = json.loads(provenance["parameters"])
     config = ModelConfig(**json.loads(provenance["config"]))
-    spec = dataclasses.replace(material("FC"), test_pressure_pa=USER_LIKE_PRESSURE_PA)
+    spec = dataclasses.replace(material(code), test_pressure_pa=pressure_pa)
     protocol = dataclasses.replace(DEFAULT_PROTOCOL, quasi_static_rate_hz=USER_LIKE_RATE_HZ)
-    return simulate_dataset(spec, params, config=config, tests=DEFAULT_TESTS, protocol=protocol, seed=0)
+    return simulate_dataset(
+        spec, params, config=config, tests=DEFAULT_TESTS, protocol=protocol, seed=0, specimen_spread=specimen_spread
+    )
 
 
 def measure(dataset: Dataset) -> dict:
@@ -50,7 +57,8 @@ def measure(dataset: Dataset) -> dict:
     observations = prepare(dataset)
     posterior = build_posterior(observations, prior, config=whole.config, held=DEFAULT_HELD)
     fitted = least_squares(posterior, prior, n_starts=DEFAULT_STARTS, seed=0)
-    force = max(float(np.nanmax(np.abs(r.force_n))) for r in dataset.runs if r.force_n is not None)
+    measured = [r.force_n[np.isfinite(r.force_n)] for r in dataset.runs if r.force_n is not None]
+    force = max(float(np.abs(f).max()) for f in measured if f.size)  # stroke runs carry no force (NaN)
     return {
         "bins": int(observations.n_bins),
         "max_force_n": round(force, 1),
@@ -59,25 +67,53 @@ def measure(dataset: Dataset) -> dict:
         "n_failed": fitted["n_failed"],
         "n_step_limit": fitted["n_step_limit"],
         "cost": round(fitted["cost"], 3),
+        # RMSE of the least-squares point per test [N or -], one parameter value shared by the specimens
+        "rmse": {test: round(q["rmse"], 6) for test, q in fitted["quality"].items()},
         "seconds": round(fitted["seconds"], 1),
     }
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--materials", nargs="+", default=list(MATERIALS), help="bundled files (default: all)")
-    parser.add_argument("--user-like", action="store_true", help="also the 1200 kPa, 10 Hz file")
+    parser.add_argument(
+        "--materials", nargs="*", default=list(MATERIALS), help="bundled files (default: all; none: `--materials`)"
+    )
+    parser.add_argument("--user-like", action="store_true", help="also the high-force 10 Hz file")
+    parser.add_argument(
+        "--user-like-kpa",
+        type=float,
+        default=USER_LIKE_PRESSURE_PA / 1e3,
+        help="test pressure of that file [kPa] (default 1200: forces to about 230 N; 2800: about 300 N)",
+    )
+    parser.add_argument("--user-like-material", default="FC", help="its generating values (default FC)")
+    parser.add_argument(
+        "--user-like-spread", type=float, default=0.05, help="its between-specimen spread (default 0.05, the rig's)"
+    )
     args = parser.parse_args()
     rows = {}
     cases = [(code, lambda code=code: load(dataset_path(code))) for code in args.materials]
     if args.user_like:
-        cases.append(("FC-1200kPa-10Hz", user_like_dataset))
-    print(f"{'dataset':<16}{'bins':>6}{'max F [N]':>10}{'converged':>10}{'rounds':>7}{'failed':>7}{'limit':>6}"
-          f"{'cost':>12}{'s':>7}", flush=True)
+        label = f"{args.user_like_material}-{args.user_like_kpa:g}kPa-10Hz"
+        if args.user_like_spread != 0.05:
+            label += f"-spread{args.user_like_spread:g}"
+        cases.append(
+            (
+                label,
+                lambda: user_like_dataset(args.user_like_kpa * 1e3, args.user_like_material, args.user_like_spread),
+            )
+        )
+    print(
+        f"{'dataset':<16}{'bins':>6}{'max F [N]':>10}{'converged':>10}{'rounds':>7}{'failed':>7}{'limit':>6}"
+        f"{'cost':>12}{'s':>7}",
+        flush=True,
+    )
     for label, make in cases:
         r = rows[label] = measure(make())
-        print(f"{label:<16}{r['bins']:>6}{r['max_force_n']:>10.1f}{str(r['converged']):>10}{r['rounds']:>7}"
-              f"{r['n_failed']:>7}{r['n_step_limit']:>6}{r['cost']:>12.3f}{r['seconds']:>7.1f}", flush=True)
+        print(
+            f"{label:<16}{r['bins']:>6}{r['max_force_n']:>10.1f}{str(r['converged']):>10}{r['rounds']:>7}"
+            f"{r['n_failed']:>7}{r['n_step_limit']:>6}{r['cost']:>12.3f}{r['seconds']:>7.1f}",
+            flush=True,
+        )
     summary = {
         "datasets": rows,
         "best_start_converged": sum(r["converged"] for r in rows.values()),
