@@ -76,7 +76,11 @@ def measure(dataset: Dataset) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument(
-        "--materials", nargs="*", default=list(MATERIALS), help="bundled files (default: all; none: `--materials`)"
+        "--materials",
+        nargs="*",
+        default=list(MATERIALS),
+        choices=MATERIALS,
+        help="bundled files (default: all; none: `--materials`)",
     )
     parser.add_argument("--user-like", action="store_true", help="also the high-force 10 Hz file")
     parser.add_argument(
@@ -85,7 +89,9 @@ def main() -> None:
         default=USER_LIKE_PRESSURE_PA / 1e3,
         help="test pressure of that file [kPa] (default 1200: forces to about 230 N; 2800: about 300 N)",
     )
-    parser.add_argument("--user-like-material", default="FC", help="its generating values (default FC)")
+    parser.add_argument(
+        "--user-like-material", default="FC", choices=MATERIALS, help="its generating values (default FC)"
+    )
     parser.add_argument(
         "--user-like-spread", type=float, default=0.05, help="its between-specimen spread (default 0.05, the rig's)"
     )
