@@ -43,10 +43,7 @@ from peano_bayes.pipeline import posterior_at_mode, prior_of, select_tests, walk
 
 def t_draws(rng, proposal: IndependenceProposal, n: int):
     """(n, D) draws of the sampler's multivariate-t proposal (drawn with ``rng``) and their log density."""
-    d = proposal.mean.size
-    z = rng.standard_normal((n, d))
-    w = rng.chisquare(proposal.df, size=n) / proposal.df
-    x = proposal.mean + (z @ np.linalg.cholesky(proposal.covariance).T) / np.sqrt(w)[:, None]
+    x = proposal.draw(n, rng)
     return x, proposal.log_density(x)
 
 

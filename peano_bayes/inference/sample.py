@@ -123,13 +123,17 @@ class IndependenceProposal:
         )
         return norm - 0.5 * (self.df + d) * np.log1p(mahalanobis / self.df)
 
+    def draw(self, n: int, random: np.random.RandomState | np.random.Generator) -> np.ndarray:
+        """(n, D) draws of the t: a normal through the Cholesky factor over the root of a chi-square / df,
+        from ``random`` (a legacy ``RandomState``, as emcee passes, or a ``Generator``: the same calls)."""
+        z = random.standard_normal((n, self.mean.size))
+        w = random.chisquare(self.df, size=n) / self.df
+        return self.mean + (z @ self._cholesky.T) / np.sqrt(w)[:, None]
+
     def __call__(self, coords: np.ndarray, random: np.random.RandomState):
         """emcee's proposal contract: new points (n, D) and log Hastings factors q(old) / q(new) (n,), drawn
         with emcee's own random state (so a resumed run repeats them)."""
-        n, d = coords.shape
-        z = random.standard_normal((n, d))
-        w = random.chisquare(self.df, size=n) / self.df
-        new = self.mean + (z @ self._cholesky.T) / np.sqrt(w)[:, None]
+        new = self.draw(coords.shape[0], random)
         return new, self.log_density(coords) - self.log_density(new)
 
 
