@@ -3,11 +3,14 @@ and in how many rounds, how many starts failed or stopped at the step limit, the
 
 The fits are the ones ``peano-bayes fit`` and ``run`` make (:func:`peano_bayes.pipeline.least_squares` on the
 default tests, the bundled prior of the material, 16 starts, seed 0). Datasets: the bundled files
-(``--materials``), and with ``--user-like`` a file such as a user's rig gives: FC's generating values tested at
-1200 kPa (forces to about 230 N; ``--user-like-kpa 2800``: about 300 N), sampled at 10 Hz, two specimens, three
-repeats, the rig's noise.
+(``--materials``; a bare ``--materials`` for none), and with ``--user-like`` a file such as a user's rig gives:
+FC's generating values tested at 1200 kPa (forces to about 230 N; ``--user-like-kpa 2800``: about 300 N),
+sampled at 10 Hz, two specimens, three repeats, the rig's noise. ``--user-like-material`` takes another bundled
+material's generating values, ``--user-like-spread`` another between-specimen spread (0: identical specimens,
+which shows how much of the least-squares misfit is the specimens' difference).
 
-    python experiments/bench_least_squares.py [--materials TP PR ...] [--user-like [--user-like-kpa 2800]]
+    python experiments/bench_least_squares.py [--materials TP PR ...] [--user-like [--user-like-kpa 2800]
+        [--user-like-material PCS] [--user-like-spread 0]]
 
 The last line printed is one JSON object.
 """
@@ -37,9 +40,10 @@ USER_LIKE_RATE_HZ = 10.0
 def user_like_dataset(
     pressure_pa: float = USER_LIKE_PRESSURE_PA, code: str = "FC", specimen_spread: float = 0.05
 ) -> Dataset:
-    """The generating values of bundled material ``code`` at ``pressure_pa`` [Pa] and 10 Hz, two specimens
-    whose stiffnesses differ by the log-normal ``specimen_spread`` (the rig's 0.05 by default): a high-force
-    file unlike the bundled ones."""
+    """The generating values of bundled material ``code`` at ``pressure_pa`` [Pa] and 10 Hz, two specimens,
+    each stiffness of each specimen drawn with its own log-normal factor of sigma ``specimen_spread`` (the rig's
+    0.05 by default; see :func:`~peano_bayes.rig.simulate_dataset`): at a high pressure, a file of higher forces
+    than the bundled ones."""
     provenance = load(dataset_path(code)).provenance  # the generating values and model of the bundled file
     params = json.loads(provenance["parameters"])
     config = ModelConfig(**json.loads(provenance["config"]))
@@ -82,7 +86,7 @@ def main() -> None:
         choices=MATERIALS,
         help="bundled files (default: all; none: `--materials`)",
     )
-    parser.add_argument("--user-like", action="store_true", help="also the high-force 10 Hz file")
+    parser.add_argument("--user-like", action="store_true", help="also the user-like 10 Hz file")
     parser.add_argument(
         "--user-like-kpa",
         type=float,
@@ -109,14 +113,14 @@ def main() -> None:
             )
         )
     print(
-        f"{'dataset':<16}{'bins':>6}{'max F [N]':>10}{'converged':>10}{'rounds':>7}{'failed':>7}{'limit':>6}"
+        f"{'dataset':<24}{'bins':>6}{'max F [N]':>10}{'converged':>10}{'rounds':>7}{'failed':>7}{'limit':>6}"
         f"{'cost':>12}{'s':>7}",
         flush=True,
     )
     for label, make in cases:
         r = rows[label] = measure(make())
         print(
-            f"{label:<16}{r['bins']:>6}{r['max_force_n']:>10.1f}{str(r['converged']):>10}{r['rounds']:>7}"
+            f"{label:<24}{r['bins']:>6}{r['max_force_n']:>10.1f}{str(r['converged']):>10}{r['rounds']:>7}"
             f"{r['n_failed']:>7}{r['n_step_limit']:>6}{r['cost']:>12.3f}{r['seconds']:>7.1f}",
             flush=True,
         )

@@ -132,6 +132,17 @@ def test_proposal_log_density_matches_its_own_draws():
     np.testing.assert_allclose(factor, proposal.log_density(np.zeros((4000, 2))) - proposal.log_density(new))
 
 
+def test_proposal_draws_with_a_generator_as_the_move_does_with_a_random_state():
+    """``draw`` takes a ``Generator`` too (importance_sampling.py): the t's mean and covariance df / (df - 2)
+    times the scale matrix; and the emcee move's points are ``draw``'s from the same random state."""
+    proposal = IndependenceProposal(np.array([1.0, 2.0]), np.array([[1.0, 0.3], [0.3, 0.5]]), df=4.0)
+    x = proposal.draw(4000, np.random.default_rng(5))
+    np.testing.assert_allclose(x.mean(axis=0), proposal.mean, atol=0.06)
+    np.testing.assert_allclose(np.cov(x.T), 2.0 * proposal.covariance, rtol=0.15, atol=0.05)
+    moved, _ = proposal(np.zeros((7, 2)), np.random.RandomState(9))
+    np.testing.assert_array_equal(moved, proposal.draw(7, np.random.RandomState(9)))
+
+
 def test_proposal_log_density_is_scipys_multivariate_t():
     from scipy import stats
 
