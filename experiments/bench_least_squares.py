@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import json
 
 import numpy as np
@@ -35,10 +36,12 @@ from peano_bayes.rig import DEFAULT_PROTOCOL, simulate_dataset
 
 USER_LIKE_PRESSURE_PA = 1200e3
 USER_LIKE_RATE_HZ = 10.0
+#: Log-normal sigma of each specimen's own stiffness factors: the rig's (``simulate_dataset``'s default).
+USER_LIKE_SPREAD = 0.05
 
 
 def user_like_dataset(
-    pressure_pa: float = USER_LIKE_PRESSURE_PA, code: str = "FC", specimen_spread: float = 0.05
+    pressure_pa: float = USER_LIKE_PRESSURE_PA, code: str = "FC", specimen_spread: float = USER_LIKE_SPREAD
 ) -> Dataset:
     """The generating values of bundled material ``code`` at ``pressure_pa`` [Pa] and 10 Hz, two specimens,
     each stiffness of each specimen drawn with its own log-normal factor of sigma ``specimen_spread`` (the rig's
@@ -97,21 +100,21 @@ def main() -> None:
         "--user-like-material", default="FC", choices=MATERIALS, help="its generating values (default FC)"
     )
     parser.add_argument(
-        "--user-like-spread", type=float, default=0.05, help="its between-specimen spread (default 0.05, the rig's)"
+        "--user-like-spread",
+        type=float,
+        default=USER_LIKE_SPREAD,
+        help=f"its between-specimen spread (default {USER_LIKE_SPREAD:g}, the rig's)",
     )
     args = parser.parse_args()
     rows = {}
     cases = [(code, lambda code=code: load(dataset_path(code))) for code in args.materials]
     if args.user_like:
-        label = f"{args.user_like_material}-{args.user_like_kpa:g}kPa-10Hz"
-        if args.user_like_spread != 0.05:
-            label += f"-spread{args.user_like_spread:g}"
-        cases.append(
-            (
-                label,
-                lambda: user_like_dataset(args.user_like_kpa * 1e3, args.user_like_material, args.user_like_spread),
-            )
+        spread = "" if args.user_like_spread == USER_LIKE_SPREAD else f"-spread{args.user_like_spread:g}"
+        label = f"{args.user_like_material}-{args.user_like_kpa:g}kPa-10Hz{spread}"
+        make = functools.partial(
+            user_like_dataset, args.user_like_kpa * 1e3, args.user_like_material, args.user_like_spread
         )
+        cases.append((label, make))
     print(
         f"{'dataset':<24}{'bins':>6}{'max F [N]':>10}{'converged':>10}{'rounds':>7}{'failed':>7}{'limit':>6}"
         f"{'cost':>12}{'s':>7}",
