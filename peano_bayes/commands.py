@@ -221,7 +221,7 @@ def _sampling_arguments(p):
         default=list(DEFAULT_TESTS),
         choices=ALL_TESTS,
         metavar="TEST",
-        help=f"tests to fit (default: {' '.join(DEFAULT_TESTS)}; the step response is ~20x dearer)",
+        help=f"tests to fit (default: {' '.join(DEFAULT_TESTS)}; the step response costs several times more)",
     )
     p.add_argument(
         "--starts", type=int, default=DEFAULT_STARTS, help=f"least-squares starts (default: {DEFAULT_STARTS})"
