@@ -44,7 +44,7 @@ def test_sbc_replicates_share_one_compiled_posterior_and_report_ranks_and_covera
     parameter, with nested central intervals (a truth inside the 50 % interval is inside the 90 % one, and so on).
 
     The coverage *study* (100 replicates to the convergence gates, 90 % coverage against its 85-95 % target) is
-    ``experiments/sbc.py``, committed in ``experiments/sbc-hierarchical/SBC.md``: chains run to convergence
+    ``experiments/sbc.py``, committed in ``experiments/sbc-hierarchical-2/SBC.md``: chains run to convergence
     cost about a minute per replicate, so four of them (the former ``test_small_sbc_covers_its_truths``, 445 s of
     the suite) coarsely repeated a check that the study makes with 25 times the replicates."""
     base = base_posterior()
