@@ -43,10 +43,11 @@ def test_sbc_replicates_share_one_compiled_posterior_and_report_ranks_and_covera
     the compiled log posterior), and reports a rank among RANK_DRAWS draws and a coverage flag for every level and
     parameter, with nested central intervals (a truth inside the 50 % interval is inside the 90 % one, and so on).
 
-    The coverage *study* (100 replicates to the convergence gates, 90 % coverage against its 85-95 % target) is
-    ``experiments/sbc.py``, committed in ``experiments/sbc-hierarchical-2/SBC.md``: chains run to convergence
-    cost about a minute per replicate, so four of them (the former ``test_small_sbc_covers_its_truths``, 445 s of
-    the suite) coarsely repeated a check that the study makes with 25 times the replicates."""
+    The coverage *study* (100 replicates to the convergence gates or an 8000-step limit, 90 % coverage against
+    its 85-95 % target) is ``experiments/sbc.py``, committed in ``experiments/sbc-hierarchical-2/SBC.md``: a
+    replicate costs about 2 minutes (median; up to two hours at the step limit), so four of them (the former
+    ``test_small_sbc_covers_its_truths``, 445 s of the suite) coarsely repeated a check that the study makes
+    with 25 times the replicates."""
     base = base_posterior()
     assert not base._compiled
     reps = [run_replicate(base, i, seed=7, warmup=40, chunk=40, max_steps=80).as_dict() for i in range(2)]
