@@ -22,7 +22,9 @@ for TP).
   arviz (minimum over parameters). A first short run compiles its step functions (timed apart, the persistent
   compilation cache then serves the measured run). A faster sampler of another distribution would prove
   nothing, so NUTS's draws are compared with ours (read back from ours' ``posterior.nc``): means and 94 %
-  interval ends per parameter, in units of ours' sd (``nuts_against_ours`` in the JSON).
+  interval ends per parameter, in units of ours' sd, with NUTS's own Monte Carlo error of the worst end (its
+  ESS is far below ours', so that error sets how small a difference the run can resolve; ``nuts_against_ours``
+  in the JSON).
 
     python experiments/bench_inference.py [--material TP] [--nuts-warmup 500] [--nuts-samples 1000] [--out DIR]
 
