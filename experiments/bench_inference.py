@@ -112,7 +112,8 @@ def numpy_seconds_per_walker(posterior, point, config) -> tuple[float, float, in
 def min_ess(draws: np.ndarray) -> float:
     """Minimum bulk ESS over parameters of draws (chains, draws, D)."""
     data = az.convert_to_dataset({f"p{i}": draws[..., i] for i in range(draws.shape[-1])})
-    return float(min(float(az.ess(data, method="bulk")[k]) for k in data.data_vars))
+    ess = az.ess(data, method="bulk")
+    return float(min(float(ess[k]) for k in data.data_vars))
 
 
 def laplace_inverse_mass(potential, centre: np.ndarray) -> np.ndarray:

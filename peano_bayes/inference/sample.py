@@ -264,9 +264,10 @@ def convergence(chain: np.ndarray, names=None, start: int = 0, n_ensembles: int 
     chains = pooled(kept, n_ensembles) if n_ensembles > 1 else kept.swapaxes(0, 1)
     draws = {f"p{i}": chains[..., i] for i in range(ndim)}
     data = az.convert_to_dataset(draws)
-    rhat = np.array([float(az.rhat(data)[k]) for k in draws])
-    ess_bulk = np.array([float(az.ess(data, method="bulk")[k]) for k in draws])
-    ess_tail = np.array([float(az.ess(data, method="tail")[k]) for k in draws])
+    rhat, ess_bulk, ess_tail = (
+        np.array([float(figure[k]) for k in draws])
+        for figure in (az.rhat(data), az.ess(data, method="bulk"), az.ess(data, method="tail"))
+    )
     names = list(names) if names is not None else list(draws)
     lengths = (chain.shape[0] - discard) / tau_max
     problems = []
