@@ -8,8 +8,10 @@ figure is computed once for all parameters.
 
 On synthetic chains of the sizes the sampler meets (AR(1) walkers, lag-1 0.99, so tau is about 200 steps), the
 script times the arviz figures both ways on the same pooled draws and checks that they are equal, and times the
-whole check as it is now. Sizes: the main job's longest check (PCS: 2343 steps, 300 of them warm-up, 4 x 42
-walkers, 20 parameters) and a long run (the independent-data fit at 7300 steps, 4 x 38 walkers, 20 parameters).
+whole check as it is now. Sizes: the main job's longest chain (PCS: 2343 steps, 4 x 42 walkers, 20 parameters;
+300 warm-up steps dropped where the main job dropped 900, so about 1640 kept steps where its last check had about
+1390) and a long run (7300 steps, 4 x 38 walkers, 20 parameters; the independent-data fit, with 4 x 42 walkers,
+was at that length when its checks were timed by hand).
 
     python experiments/bench_convergence.py
 
