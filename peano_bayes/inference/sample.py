@@ -239,6 +239,15 @@ def pooled(chain: np.ndarray, n_ensembles: int) -> np.ndarray:
     return np.moveaxis(split, 0, 2).reshape((n_ensembles, per * steps) + rest)
 
 
+def arviz_figures(data) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rank-normalized split R-hat, bulk ESS and tail ESS, each (D,) in ``data``'s variable order, of an arviz
+    dataset of D variables (chains, draws): each figure computed once for all variables."""
+    return tuple(
+        np.array([float(figure[k]) for k in data.data_vars])
+        for figure in (az.rhat(data), az.ess(data, method="bulk"), az.ess(data, method="tail"))
+    )
+
+
 def convergence(chain: np.ndarray, names=None, start: int = 0, n_ensembles: int = 1) -> Convergence:
     """Convergence figures of ``chain`` (steps, walkers, D) of ``n_ensembles`` independently started ensembles
     after its first ``start`` steps (the warm-up) against :data:`TARGETS`; ``discard`` counts from the chain's
@@ -263,11 +272,7 @@ def convergence(chain: np.ndarray, names=None, start: int = 0, n_ensembles: int 
     discard += start
     chains = pooled(kept, n_ensembles) if n_ensembles > 1 else kept.swapaxes(0, 1)
     draws = {f"p{i}": chains[..., i] for i in range(ndim)}
-    data = az.convert_to_dataset(draws)
-    rhat, ess_bulk, ess_tail = (
-        np.array([float(figure[k]) for k in draws])
-        for figure in (az.rhat(data), az.ess(data, method="bulk"), az.ess(data, method="tail"))
-    )
+    rhat, ess_bulk, ess_tail = arviz_figures(az.convert_to_dataset(draws))
     names = list(names) if names is not None else list(draws)
     lengths = (chain.shape[0] - discard) / tau_max
     problems = []
@@ -608,6 +613,7 @@ __all__ = [
     "IndependenceProposal",
     "TARGETS",
     "Convergence",
+    "arviz_figures",
     "SampleResult",
     "convergence",
     "initial_walkers",
