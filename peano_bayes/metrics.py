@@ -44,6 +44,7 @@ from scipy.signal import savgol_filter
 from . import bundled
 from .errors import PeanoBayesInputError
 from .formatting import format_number
+from .inference.fit import structured_tests
 from .inference.posterior import STEP_ONLY_PARAMETERS
 from .inference.results import load_result, parameter_draws, result_config
 from .materials import MATERIALS, MaterialSpec
@@ -183,14 +184,104 @@ def model_metrics(material, params: dict, *, config: ModelConfig = DEFAULT_CONFI
     return values
 
 
+# --- model discrepancy: what a misfit of the fitted tests adds to a prediction read off them -----------------
+
+
+@dataclass(frozen=True)
+class ReadOff:
+    """Where a Table 3 metric comes from: the fitted ``test`` whose signal it is read off, and ``per_signal``,
+    the metric's change per unit change of that signal [metric unit per N, or per unit strain], as a function
+    ``(values, test_pressure_pa, flat_length_m) -> scalar or (n,)`` of the draws' metrics ``values`` (metric
+    -> (n,)), the pressure the test was run at and the muscle's flat length; None where a misfit's size says
+    nothing of the metric (a slope, a ratio of areas, a quantity of an unfitted test)."""
+
+    test: str
+    per_signal: Callable | None = None
+
+
+def _per_mpa(values, test_pressure_pa, flat_length_m):
+    return m.PA_PER_MPA / test_pressure_pa
+
+
+def _strain(values, test_pressure_pa, flat_length_m):
+    return 1.0
+
+
+def _energy(values, test_pressure_pa, flat_length_m):
+    # A force error of mean d over the contraction from 0 to the free strain changes the work by d eps L0, and
+    # |d| is at most the error's RMS there: roughly the misfit's RMS over the test.
+    return np.abs(values["free_strain"]) * flat_length_m * m.PA_PER_MPA / test_pressure_pa
+
+
+#: Metric -> :class:`ReadOff`. The blocking force is the blocking test's force at its top pressure, the stroke
+#: the stroke test's strain; the free strain is the static contraction at low load, which the stroke test
+#: measures as strain directly (the load cycles see it through the force and its slope); the energy integrates
+#: the load cycle's force over the contraction. Stiffness and hysteresis (a slope, a ratio of areas) and the
+#: step metrics are not carried.
+READ_OFF = {
+    STIFFNESS: ReadOff("load_cycle"),
+    "hysteresis_loss": ReadOff("load_cycle"),
+    "free_strain": ReadOff("stroke", _strain),
+    "energy_per_pressure": ReadOff("load_cycle", _energy),
+    "blocking_force_per_pressure": ReadOff("blocking", _per_mpa),
+    "stroke": ReadOff("stroke", _strain),
+    **{name: ReadOff("step") for name in STEP_METRICS},
+}
+
+
+def misfit_discrepancy(summary: dict) -> dict[str, float]:
+    """test -> sd of the model discrepancy a prediction read off it carries [the test's signal unit: N or
+    strain]: its RMSE beyond the sensor noise at the posterior mean (``excess_rmse`` of ``summary.json``'s
+    ``fit_quality_posterior_mean``), for every test whose misfit has structure
+    (:func:`~peano_bayes.inference.fit.structured_tests`; a misfit consistent with noise is noise, not a
+    discrepancy) and whose excess is a positive number. Empty for a result whose model explains its data."""
+    quality = summary.get("fit_quality_posterior_mean", {})
+    out = {}
+    for test in structured_tests(summary.get("residual_correlation", {})):
+        excess = quality.get(test, {}).get("excess_rmse")
+        if excess is not None and math.isfinite(excess) and excess > 0:
+            out[test] = float(excess)
+    return out
+
+
+def add_discrepancy(
+    values: dict, discrepancy: dict, test_pressure_pa: float, flat_length_m: float, rng: np.random.Generator
+) -> tuple[dict, dict, tuple]:
+    """Posterior predictive draws with the model discrepancy of the tests they are read off.
+
+    ``values``: metric -> (n,) parameter-only draws [SI]; ``discrepancy``: test -> sd [signal unit]
+    (:func:`misfit_discrepancy`); ``test_pressure_pa`` [Pa] and ``flat_length_m`` [m]: the fitted test's
+    pressure and the muscle's length (:data:`READ_OFF`'s scales). Each draw of a metric :data:`READ_OFF` maps
+    gets an independent normal value of sd ``per_signal * sd``: the marginal predictive of an unknown smooth
+    misfit of that size at the point the metric is read. Returns (metric -> (n,) draws, metric -> (n,) sd added
+    [metric unit] for the metrics that got one, metrics whose test misfits but whose discrepancy is not carried).
+    """
+    draws, added, not_carried = dict(values), {}, []
+    for name, source in READ_OFF.items():
+        if name not in values or source.test not in discrepancy:
+            continue
+        if source.per_signal is None:
+            not_carried.append(name)
+            continue
+        scale = np.abs(source.per_signal(values, test_pressure_pa, flat_length_m))
+        sd = np.broadcast_to(scale * discrepancy[source.test], np.shape(values[name]))
+        draws[name] = values[name] + sd * rng.standard_normal(sd.shape)
+        added[name] = sd
+    return draws, added, tuple(not_carried)
+
+
 @dataclass(frozen=True)
 class PosteriorMetrics:
     """Posterior predictive Table 3 metrics of one material.
 
-    **Fields:** ``material`` code; ``draws`` metric -> (n,) values [SI, :data:`METRIC_UNITS`], NaN where a
-    draw's simulation failed or the metric is undefined; ``n_failed`` draws whose physics did not converge;
-    ``prior_only`` parameters the posterior does not hold (not informed by the fitted tests), drawn from the
-    prior; ``from_prior`` metrics that depend on them (e.g. the step metrics when the step test was not fitted).
+    **Fields:** ``material`` code; ``draws`` metric -> (n,) predictive values [SI, :data:`METRIC_UNITS`]: the
+    parameter draws' metrics plus, where the fitted test a metric is read off misfits with structure, that
+    test's model discrepancy (:func:`add_discrepancy`); NaN where a draw's simulation failed or the metric is
+    undefined; ``n_failed`` draws whose physics did not converge; ``prior_only`` parameters the posterior does
+    not hold (not informed by the fitted tests), drawn from the prior; ``from_prior`` metrics that depend on
+    them (e.g. the step metrics when the step test was not fitted); ``parameter_draws`` metric -> (n,) the
+    parameter draws' metrics alone; ``discrepancy_sd`` metric -> (n,) sd added [metric unit];
+    ``not_carried`` metrics whose fitted test misfits but whose discrepancy has no size in the metric.
     """
 
     material: str
@@ -198,27 +289,44 @@ class PosteriorMetrics:
     n_failed: int
     prior_only: tuple
     from_prior: tuple
+    parameter_draws: dict
+    discrepancy_sd: dict
+    not_carried: tuple
 
     def summary(self, hdi_prob: float = 0.94) -> dict:
-        """metric -> ``median``, ``hdi_low``, ``hdi_high`` (arviz HDI), ``unit``, ``n`` (finite draws) and
-        ``from_prior``."""
+        """metric -> ``median``, ``hdi_low``, ``hdi_high`` (arviz HDI of ``draws``: what a designer reads),
+        ``parameter_hdi_low``, ``parameter_hdi_high`` (of ``parameter_draws``), ``discrepancy_sd`` (median sd
+        added [metric unit], None if none), ``discrepancy_test`` (the test it comes from, None if none),
+        ``misfit_not_carried``, ``unit``, ``n`` (finite draws) and ``from_prior``."""
         out = {}
         for name, values in self.draws.items():
-            finite = values[np.isfinite(values)]
-            if finite.size >= 2:
-                low, high = (float(x) for x in az.hdi(finite, hdi_prob=hdi_prob))
-                median = float(np.median(finite))
-            else:
-                low = high = median = float("nan")
+            median, low, high = _median_hdi(values, hdi_prob)
+            _, p_low, p_high = _median_hdi(self.parameter_draws[name], hdi_prob)
+            sd = self.discrepancy_sd.get(name)
             out[name] = {
                 "median": median,
                 "hdi_low": low,
                 "hdi_high": high,
+                "parameter_hdi_low": p_low,
+                "parameter_hdi_high": p_high,
+                "discrepancy_sd": None if sd is None else float(np.median(sd)),
+                "discrepancy_test": None if sd is None else READ_OFF[name].test,
+                "misfit_not_carried": name in self.not_carried,
                 "unit": METRIC_UNITS[name],
-                "n": int(finite.size),
+                "n": int(np.isfinite(values).sum()),
                 "from_prior": name in self.from_prior,
             }
         return out
+
+
+def _median_hdi(values, hdi_prob: float) -> tuple[float, float, float]:
+    """Median and arviz HDI of the finite ``values``; NaN for fewer than two."""
+    finite = np.asarray(values, float)
+    finite = finite[np.isfinite(finite)]
+    if finite.size < 2:
+        return float("nan"), float("nan"), float("nan")
+    low, high = (float(x) for x in az.hdi(finite, hdi_prob=hdi_prob))
+    return float(np.median(finite)), low, high
 
 
 def protocol_material(idata) -> str | MaterialSpec:
@@ -269,6 +377,7 @@ def posterior_metrics(
     progress: Callable | None = None,
     level: str = "new_specimen",
     test_pressure_pa: float | None = None,
+    discrepancy: dict | None = None,
 ) -> PosteriorMetrics:
     """Posterior predictive Table 3 metrics of a result (``posterior.nc`` as arviz InferenceData): the paper's
     protocol simulated noise-free for ``n_draws`` posterior draws
@@ -276,22 +385,34 @@ def posterior_metrics(
     the rig would be (:func:`model_metrics`). ``level``: ``"new_specimen"`` (default: a muscle not yet made,
     so the intervals include the between-specimen spread) or ``"population"``. ``progress`` wraps the draw
     iterator (e.g. ``tqdm``). ``test_pressure_pa``: simulate the protocol at this pressure instead of the
-    material's own test pressure (to compare materials at one pressure)."""
-    protocol = at_test_pressure(protocol_material(idata), test_pressure_pa)
+    material's own test pressure (to compare materials at one pressure). ``discrepancy``: test -> sd of its
+    model discrepancy [signal unit] (:func:`misfit_discrepancy` of the result's ``summary.json``), added to the
+    metrics read off it (:func:`add_discrepancy`, at the material's own test pressure, where it was measured;
+    the normal values from ``seed``); None or empty: parameter draws alone."""
+    own = protocol_material(idata)
+    protocol = at_test_pressure(own, test_pressure_pa)
     config = result_config(idata)
     sets, prior_only = parameter_draws(idata, n_draws, seed, level=level)
-    draws = {name: np.full(n_draws, np.nan) for name in METRIC_UNITS}
+    values = {name: np.full(n_draws, np.nan) for name in METRIC_UNITS}
     failed = 0
     for i, params in enumerate(progress(sets) if progress else sets):
         try:
-            values = model_metrics(protocol, params, config=config)
+            metrics = model_metrics(protocol, params, config=config)
         except RigSimulationError:
             failed += 1
             continue
-        for name, value in values.items():
-            draws[name][i] = value
+        for name, value in metrics.items():
+            values[name][i] = value
     from_prior = STEP_METRICS if any(n in STEP_ONLY_PARAMETERS for n in prior_only) else ()
-    return PosteriorMetrics(idata.posterior.attrs["material"], draws, failed, prior_only, from_prior)
+    draws, added, not_carried = values, {}, ()
+    if discrepancy:
+        own_pressure_pa = (MATERIALS[own] if isinstance(own, str) else own).test_pressure_pa
+        rng = np.random.default_rng([seed, 1])
+        draws, added, not_carried = add_discrepancy(
+            values, discrepancy, own_pressure_pa, PAPER_GEOMETRY.flat_length_m, rng
+        )
+    material = idata.posterior.attrs["material"]
+    return PosteriorMetrics(material, draws, failed, prior_only, from_prior, values, added, not_carried)
 
 
 def published_metrics(material: str, path: str | Path | None = None) -> list[dict]:
@@ -322,21 +443,36 @@ def compare_published(material: str, summary: dict, path: str | Path | None = No
 
 
 def metrics_markdown(material: str, summary: dict, comparison: list[dict]) -> str:
-    """A markdown table of a material's posterior metrics with the published values beside them."""
+    """A markdown table of a material's posterior metrics with the published values beside them, and the model
+    discrepancy each interval carries (:func:`add_discrepancy`)."""
     published = {row["metric"]: row for row in comparison}
     lines = [
-        "| metric | unit | median | 94 % interval | published | inside |",
-        "|---|---|---|---|---|---|",
+        "| metric | unit | median | 94 % interval | published | inside | model misfit |",
+        "|---|---|---|---|---|---|---|",
     ]
     for name, s in summary.items():
         row = published.get(name)
         pub = f"{row['value']:.3g} ({row['kind']})" if row else "-"
         inside = "-" if not row or row["inside"] is None else ("yes" if row["inside"] else "**no**")
         flag = " (prior: step not fitted)" if s["from_prior"] else ""
+        misfit = "-"
+        if s.get("discrepancy_sd") is not None:
+            misfit = f"included: sd {format_number(s['discrepancy_sd'])} from {s['discrepancy_test']}"
+        elif s.get("misfit_not_carried"):
+            misfit = f"**not included** ({READ_OFF[name].test} misfits)"
         lines.append(
             f"| {name}{flag} | {s['unit']} | {format_number(s['median'])} | "
-            f"{format_number(s['hdi_low'])} to {format_number(s['hdi_high'])} | {pub} | {inside} |"
+            f"{format_number(s['hdi_low'])} to {format_number(s['hdi_high'])} | {pub} | {inside} | {misfit} |"
         )
+    if any(s.get("discrepancy_sd") is not None or s.get("misfit_not_carried") for s in summary.values()):
+        lines += [
+            "",
+            "Where a fitted test misfits with structure, a metric read off it can be off the model by about that "
+            "test's RMSE beyond the sensor noise: its interval includes that discrepancy (*included*; the "
+            "parameter-only interval is `parameter_hdi_*` in `metrics.json`). A metric marked **not included** "
+            "depends on such a test in a way the misfit's size does not set (a slope, a ratio of areas): its "
+            "interval is the parameters' alone and too narrow.",
+        ]
     return "\n".join(lines)
 
 
@@ -354,8 +490,11 @@ def evaluate_result(
     ``test_pressure_kpa`` (the pressure its metrics are simulated at; ``None`` if unknown),
     ``own_test_pressure_kpa`` (the material's), ``n_draws``, ``n_failed``, ``prior_only``, ``summary``
     (:meth:`PosteriorMetrics.summary`), ``published`` (:func:`compare_published`, empty away from the own test
-    pressure: the paper's values are at that pressure) and ``draws`` (metric -> list of values, for
-    :mod:`peano_bayes.ranking`). ``test_pressure_kpa``: a common pressure [kPa] instead of the material's own."""
+    pressure: the paper's values are at that pressure), ``discrepancy`` (test -> sd [signal unit] of the model
+    discrepancy added to the metrics read off it, :func:`misfit_discrepancy` of the ``summary.json`` beside
+    the result; empty without one or where the model explains the data) and ``draws`` (metric -> list of
+    predictive values, for :mod:`peano_bayes.ranking`). ``test_pressure_kpa``: a common pressure [kPa]
+    instead of the material's own."""
     from tqdm.auto import tqdm
 
     from .atomic import write_text
@@ -370,7 +509,19 @@ def evaluate_result(
     own = None if spec is None else spec.test_pressure_pa / 1e3
     common = None if test_pressure_kpa is None else float(test_pressure_kpa)
     pressure_pa = None if common is None else 1e3 * common
-    result = posterior_metrics(idata, n_draws=n_draws, seed=seed, progress=bar, test_pressure_pa=pressure_pa)
+    directory = Path(path) if Path(path).is_dir() else Path(path).parent
+    discrepancy = {}
+    if (directory / "summary.json").exists():
+        try:
+            discrepancy = misfit_discrepancy(_read_json(directory / "summary.json"))
+        except (KeyError, TypeError, AttributeError) as err:
+            raise PeanoBayesInputError(
+                f"{directory / 'summary.json'}: its fit quality or residual correlation is malformed ({err!r}); "
+                "expected the summary.json that 'peano-bayes fit' wrote"
+            ) from None
+    result = posterior_metrics(
+        idata, n_draws=n_draws, seed=seed, progress=bar, test_pressure_pa=pressure_pa, discrepancy=discrepancy
+    )
     summary = result.summary(hdi_prob)
     out = {
         "material": material,
@@ -382,10 +533,21 @@ def evaluate_result(
         "hdi_prob": hdi_prob,
         "summary": summary,
         "published": compare_published(material, summary) if common in (None, own) else [],
+        "discrepancy": discrepancy,
         "draws": {name: [float(x) for x in values] for name, values in result.draws.items()},
     }
-    directory = Path(path) if Path(path).is_dir() else Path(path).parent
     write_text(metrics_file(directory, common), json.dumps(out, indent=1, default=float))
+    return out
+
+
+def _read_json(file: Path) -> dict:
+    """A JSON object from ``file``, or a :class:`PeanoBayesInputError` naming it."""
+    try:
+        out = json.loads(file.read_text())
+    except json.JSONDecodeError as err:
+        raise PeanoBayesInputError(f"{file}: not valid JSON ({err})") from None
+    if not isinstance(out, dict):
+        raise PeanoBayesInputError(f"{file}: expected a JSON object, got {type(out).__name__}")
     return out
 
 

@@ -35,7 +35,7 @@ from .defaults import (
 from .errors import PeanoBayesInputError
 from .formatting import format_number
 from .inference.coordinates import sampler_coordinates
-from .inference.fit import fit, fit_quality, predictions, residual_correlation, sensor_noise
+from .inference.fit import fit, fit_quality, predictions, residual_correlation, sensor_noise, structured_tests
 from .inference.laplace import Laplace, NonCentred, posterior_mode, refine_mode
 from .inference.likelihood import prepare
 from .inference.posterior import CONTRAST_PREFIX, DEFAULT_HELD, SPECIMEN_SD, Posterior, build_posterior
@@ -723,7 +723,7 @@ def index_markdown(
                 f"{_with_unit(q.get('excess_rmse'), q['unit'])} | {lag} |"
             )
         adopted = [t for t, c in correlation.items() if c.get("likelihood_lag1") is not None]
-        structured = [t for t, c in correlation.items() if not c["consistent_with_noise"] or t in adopted]
+        structured = structured_tests(correlation)
         unadopted = [t for t in structured if t not in adopted]
         if structured:
             lines += [
@@ -746,8 +746,9 @@ def index_markdown(
                 )
                 + (
                     "A quantity read off one of these tests can be off the model's prediction by roughly that "
-                    "test's RMSE beyond the sensor noise, which no interval here includes (*Model discrepancy* in "
-                    "the project's docs/inference.md). "
+                    "test's RMSE beyond the sensor noise: the parameter intervals above do not include it; the "
+                    "Table 3 metrics below do where a metric is read off such a test (their *model misfit* "
+                    "column; *Model discrepancy* in the project's docs/inference.md). "
                     if any(_finite(s["fit_quality_posterior_mean"].get(t, {}).get("excess_rmse")) for t in structured)
                     else ""
                 )

@@ -1,10 +1,11 @@
 """Design ranking with uncertainty: which material is best by each Table 3 criterion, and how sure we are.
 
-Works on posterior predictive metric draws (:mod:`peano_bayes.metrics`), one independent posterior per
-material, so draws of different materials are paired by index (any pairing of independent draws is a draw
-from the joint). Per criterion: the probability each material is best, the pairwise matrix P(row better than
-column), the expected rank with a 94 % interval; over :data:`PARETO_CRITERIA` jointly, the probability each
-material is Pareto-optimal; and the paper's stated orderings (:data:`PUBLISHED_ORDERINGS`) as probabilities.
+Works on posterior predictive metric draws (:mod:`peano_bayes.metrics`: a new specimen's, with the model
+discrepancy of a test that misfits where a metric is read off one), one independent posterior per material, so
+draws of different materials are paired by index (any pairing of independent draws is a draw from the joint).
+Per criterion: the probability each material is best, the pairwise matrix P(row better than column), the
+expected rank with a 94 % interval; over :data:`PARETO_CRITERIA` jointly, the probability each material is
+Pareto-optimal; and the paper's stated orderings (:data:`PUBLISHED_ORDERINGS`) as probabilities.
 """
 
 from __future__ import annotations

@@ -3,6 +3,7 @@ parameters fall inside the posterior's spread; unfitted step parameters are flag
 
 import json
 
+import arviz as az
 import numpy as np
 import pytest
 
@@ -52,8 +53,9 @@ def test_unfitted_parameters_come_from_the_prior_the_fit_used(result_dir, tmp_pa
     idata.posterior.attrs.update(
         material="VM",
         prior=str(prior),
-        conditions=json.dumps({"fluid": "water", "test_pressure_pa": 1.5e5, "step_load_n": 20.0,
-                               "start_tension_n": 30.0}),
+        conditions=json.dumps(
+            {"fluid": "water", "test_pressure_pa": 1.5e5, "step_load_n": 20.0, "start_tension_n": 30.0}
+        ),
     )
     sets, prior_only = parameter_draws(idata, 4, seed=1)
     assert "orifice_area_m2" in prior_only
@@ -151,3 +153,108 @@ def test_metrics_at_a_common_pressure_go_to_their_own_file_and_follow_the_pressu
     assert np.all(np.asarray(at_60["draws"]["free_strain"]) > np.asarray(own["draws"]["free_strain"]))
     assert main(["metrics", str(result_dir), "--pressure-kpa", "-5", "--no-progress"]) == 2
     assert "--pressure-kpa must be a positive number of kPa, got -5" in capsys.readouterr().err
+
+
+# --- model discrepancy: a misfit test's excess widens what is read off it -----------------------------------
+
+#: sd of a standard normal's 94 % HDI half-width: the central interval of a normal is its HDI.
+Z94 = 1.8807936081512509
+
+
+def _summary(structured: dict, consistent: dict = None, adopted: dict = None) -> dict:
+    """A ``summary.json``'s fit quality and residual correlation: tests of ``structured`` misfit with structure
+    (excess RMSE as given), ``consistent`` are consistent with noise, ``adopted`` were sampled as AR(1)."""
+    quality, correlation = {}, {}
+    for kind, tests in (("structured", structured), ("consistent", consistent or {}), ("adopted", adopted or {})):
+        for test, excess in tests.items():
+            quality[test] = {"excess_rmse": excess}
+            correlation[test] = {
+                "consistent_with_noise": kind != "structured",
+                "likelihood_lag1": 0.9 if kind == "adopted" else None,
+            }
+    return {"fit_quality_posterior_mean": quality, "residual_correlation": correlation}
+
+
+def test_misfit_discrepancy_is_the_excess_of_the_tests_that_misfit_with_structure():
+    from peano_bayes.metrics import misfit_discrepancy
+
+    summary = _summary({"blocking": 2.0, "stroke": float("nan")}, {"load_cycle": 0.04}, {"step": 0.01})
+    assert misfit_discrepancy(summary) == {"blocking": 2.0, "step": 0.01}
+    assert misfit_discrepancy(_summary({"blocking": 0.0})) == {}  # structured but nothing beyond the noise
+    assert misfit_discrepancy({}) == {}  # a result sampled before fits reported either
+
+
+def test_each_metric_gets_the_discrepancy_of_the_test_it_is_read_off_at_its_scale():
+    """Constant parameter draws, so the predictive spread is the discrepancy alone: the blocking force per MPa
+    carries the blocking test's force misfit over the test pressure, stroke and free strain the stroke test's
+    strain misfit, the energy a force misfit over the contraction; slopes and area ratios are flagged, and a
+    metric of a test that fits keeps its draws."""
+    from peano_bayes.metrics import METRIC_UNITS, add_discrepancy
+
+    n = 40_000
+    values = {name: np.full(n, 0.5) for name in METRIC_UNITS}
+    values["free_strain"] = np.full(n, 0.2)
+    force_n, strain, pressure_pa, length_m = 2.0, 0.004, 2e5, 0.05
+    draws, added, not_carried = add_discrepancy(
+        values,
+        {"blocking": force_n, "load_cycle": force_n, "stroke": strain},
+        pressure_pa,
+        length_m,
+        np.random.default_rng(3),
+    )
+    expected = {
+        "blocking_force_per_pressure": force_n / 0.2,  # N over MPa
+        "stroke": strain,
+        "free_strain": strain,
+        "energy_per_pressure": force_n * 0.2 * length_m / 0.2,  # N x strain x m over MPa
+    }
+    for name, sd in expected.items():
+        np.testing.assert_allclose(added[name], sd, rtol=1e-12, err_msg=name)
+        spread = draws[name] - values[name]
+        assert abs(np.mean(spread)) < 4 * sd / np.sqrt(n), name
+        assert abs(np.std(spread) / sd - 1) < 0.02, name  # se of a sample sd at n = 40000: 0.35 %
+        low, high = az.hdi(draws[name], hdi_prob=0.94)
+        assert abs((high - low) / (2 * Z94 * sd) - 1) < 0.03, name
+    assert set(not_carried) == {"stiffness_at_minus_1.5pct_0kPa", "hysteresis_loss"}
+    for name in set(METRIC_UNITS) - set(expected):
+        assert draws[name] is values[name], name
+    unchanged, none, _ = add_discrepancy(values, {}, pressure_pa, length_m, np.random.default_rng(3))
+    assert none == {} and all(unchanged[k] is values[k] for k in values)
+
+
+@pytest.mark.slow
+def test_metrics_of_a_result_that_misfits_carry_its_discrepancy(result_dir, tmp_path):
+    """A result whose ``summary.json`` says the blocking and load-cycle tests misfit with structure: the
+    blocking force's interval widens by the blocking excess over the test pressure (TP: 30 kPa), the
+    hysteresis keeps its parameter interval and is flagged, and the table says which is which."""
+    import shutil
+
+    from peano_bayes.metrics import evaluate_result, metrics_markdown
+
+    shutil.copy(result_dir / "posterior.nc", tmp_path / "posterior.nc")
+    (tmp_path / "summary.json").write_text(json.dumps(_summary({"blocking": 3.0, "load_cycle": 1.0})))
+    out = evaluate_result(tmp_path, n_draws=3, progress=False)
+    written = json.loads((tmp_path / "metrics.json").read_text())
+    assert written["discrepancy"] == out["discrepancy"] == {"blocking": 3.0, "load_cycle": 1.0}
+    block = out["summary"]["blocking_force_per_pressure"]
+    assert block["discrepancy_test"] == "blocking" and block["discrepancy_sd"] == pytest.approx(3.0 / 0.03)
+    assert block["hdi_high"] - block["hdi_low"] > block["parameter_hdi_high"] - block["parameter_hdi_low"]
+    loss = out["summary"]["hysteresis_loss"]
+    assert loss["misfit_not_carried"] and loss["discrepancy_sd"] is None
+    assert (loss["hdi_low"], loss["hdi_high"]) == (loss["parameter_hdi_low"], loss["parameter_hdi_high"])
+    stroke = out["summary"]["stroke"]  # the stroke test fits: nothing added, nothing flagged
+    assert stroke["discrepancy_sd"] is None and not stroke["misfit_not_carried"]
+    table = metrics_markdown(out["material"], out["summary"], out["published"])
+    assert "included: sd 100 from blocking" in table and "**not included** (load_cycle misfits)" in table
+
+
+@pytest.mark.parametrize("content", ["[1, 2]", '{"residual_correlation": {"blocking": 3}}', "{not json"])
+def test_a_malformed_summary_beside_the_result_exits_2_naming_it(result_dir, tmp_path, capsys, content):
+    import shutil
+
+    shutil.copy(result_dir / "posterior.nc", tmp_path / "posterior.nc")
+    (tmp_path / "summary.json").write_text(content)
+    assert main(["metrics", str(tmp_path), "--draws", "2", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert str(tmp_path / "summary.json") in err and "Traceback" not in err
+    assert not (tmp_path / "metrics.json").exists()

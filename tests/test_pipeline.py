@@ -71,6 +71,7 @@ def test_the_results_page_flags_a_test_whose_residuals_have_structure():
     page = index_markdown([{**summary, "residual_correlation": {"load_cycle": correlated}}])
     assert "| load_cycle | 2.1 N | 5.4 N | 0.9975 | 2.05 N | 0.95 (structured) |" in page
     assert "off the model's prediction by roughly that test's RMSE beyond the sensor noise" in page
+    assert "the parameter intervals above do not include it; the Table 3 metrics below do" in page
     assert "**Misfit with structure** in load_cycle" in page
     assert "The intervals that load_cycle inform are narrower than the data justify" in page
     adopted = index_markdown(
@@ -86,7 +87,7 @@ def test_the_results_page_flags_a_test_whose_residuals_have_structure():
     older = {**summary, "fit_quality_posterior_mean": {"load_cycle": before_column}}
     old_page = index_markdown([{**older, "residual_correlation": {"load_cycle": correlated}}])
     assert "| load_cycle | 2.1 N | 5.4 N | 0.9975 |  | 0.95 (structured) |" in old_page  # sampled before the column
-    assert "beyond the sensor noise, which no interval" not in old_page and "Try `--discover`." in old_page
+    assert "beyond the sensor noise: the parameter" not in old_page and "Try `--discover`." in old_page
     quiet = index_markdown([{**summary, "residual_correlation": {"load_cycle": white}}])
     assert "| load_cycle | 2.1 N | 5.4 N | 0.9975 | 2.05 N | -0.03 |" in quiet and "Misfit with structure" not in quiet
 

@@ -280,6 +280,14 @@ def residual_correlation(params, observations: Observations, config: ModelConfig
     return out
 
 
+def structured_tests(correlation: dict) -> tuple[str, ...]:
+    """Tests whose misfit has structure in a result's ``residual_correlation`` (``summary.json``): found not
+    consistent with noise at the posterior mean, or sampled with AR(1) residuals (structured at the mode)."""
+    return tuple(
+        t for t, c in correlation.items() if not c["consistent_with_noise"] or c.get("likelihood_lag1") is not None
+    )
+
+
 def structured_lag1(correlation: dict) -> dict[str, float]:
     """test -> lag-1 correlation of every test that :func:`residual_correlation` found structured: what the
     likelihood then takes as its residuals' AR(1) correlation
@@ -407,6 +415,7 @@ __all__ = [
     "noise_excess",
     "predictions",
     "residual_correlation",
+    "structured_tests",
     "residual_function",
     "sensor_noise",
     "structured_lag1",
