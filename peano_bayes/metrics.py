@@ -510,15 +510,7 @@ def evaluate_result(
     common = None if test_pressure_kpa is None else float(test_pressure_kpa)
     pressure_pa = None if common is None else 1e3 * common
     directory = Path(path) if Path(path).is_dir() else Path(path).parent
-    discrepancy = {}
-    if (directory / "summary.json").exists():
-        try:
-            discrepancy = misfit_discrepancy(_read_json(directory / "summary.json"))
-        except (KeyError, TypeError, AttributeError) as err:
-            raise PeanoBayesInputError(
-                f"{directory / 'summary.json'}: its fit quality or residual correlation is malformed ({err!r}); "
-                "expected the summary.json that 'peano-bayes fit' wrote"
-            ) from None
+    discrepancy = result_discrepancy(directory)
     result = posterior_metrics(
         idata, n_draws=n_draws, seed=seed, progress=bar, test_pressure_pa=pressure_pa, discrepancy=discrepancy
     )
@@ -538,6 +530,21 @@ def evaluate_result(
     }
     write_text(metrics_file(directory, common), json.dumps(out, indent=1, default=float))
     return out
+
+
+def result_discrepancy(directory: str | Path) -> dict[str, float]:
+    """:func:`misfit_discrepancy` of the ``summary.json`` in a result ``directory``; empty without one (a result
+    written before fits reported it). Raises :class:`PeanoBayesInputError` naming a malformed file."""
+    file = Path(directory) / "summary.json"
+    if not file.exists():
+        return {}
+    try:
+        return misfit_discrepancy(_read_json(file))
+    except (KeyError, TypeError, AttributeError) as err:
+        raise PeanoBayesInputError(
+            f"{file}: its fit quality or residual correlation is malformed ({err!r}); "
+            "expected the summary.json that 'peano-bayes fit' wrote"
+        ) from None
 
 
 def _read_json(file: Path) -> dict:

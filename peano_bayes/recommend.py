@@ -485,20 +485,21 @@ def recommend(
             f"mount compliance: expected a finite number >= 0 [m/N], got {mount_compliance_m_per_n!r}"
         )
     from .inference.results import load_result
-    from .metrics import read_metrics
+    from .metrics import read_metrics, result_discrepancy
 
     spec = load_spec(spec_path)
     root = Path(results_dir) if results_dir is not None else spec.results_dir
     codes = spec.materials or tuple(sorted(p.parent.name for p in root.glob("*/posterior.nc")))
     if not codes:
         raise PeanoBayesInputError(f"{root}: no material results (*/posterior.nc); run 'peano-bayes run' first")
-    materials = {}
+    materials, misfits = {}, {}
     for code in codes:
         directory = root / code
         if not (directory / "posterior.nc").exists():
             raise PeanoBayesInputError(f"{directory}: no posterior.nc for material {code!r}")
         metrics = read_metrics(directory) if (directory / "metrics.json").exists() else None
         materials[code] = (load_result(directory), metrics)
+        misfits[code] = result_discrepancy(directory)
     candidates, removed = evaluate_candidates(
         spec, materials, mount_compliance_m_per_n=mount_compliance_m_per_n, seed=seed, log=log
     )
@@ -509,6 +510,13 @@ def recommend(
             notes.append(
                 f"response time of {', '.join(prior_based)} rests on the prior of the inlet and damping "
                 "parameters: their fits had no step test"
+            )
+    for code, tests in misfits.items():
+        if tests:
+            notes.append(
+                f"the model misfits {code}'s {', '.join(tests)} test beyond the sensor noise (residuals with "
+                "structure): its force predictions and probabilities are of the closest model and do not include "
+                "that misfit"
             )
     unconverged = [c for c, (idata, _) in materials.items() if not idata.posterior.attrs.get("converged", 1)]
     if unconverged:

@@ -167,6 +167,21 @@ def test_an_unconverged_material_makes_the_recommendation_provisional(results, t
         assert any("the chains of TP did not converge" in n for n in notes) == (not converged)
 
 
+def test_a_material_whose_model_misfits_says_so_in_the_recommendation(results, tmp_path):
+    root = tmp_path / "misfit"
+    shutil.copytree(results, root)
+    spec = _spec(tmp_path, GOOD, "n_tubes = [4]\n")
+    structured = {"consistent_with_noise": False, "likelihood_lag1": None}
+    for excess, expected in ((2.0, True), (0.0, False)):
+        summary = {
+            "fit_quality_posterior_mean": {"blocking": {"excess_rmse": excess}},
+            "residual_correlation": {"blocking": structured},
+        }
+        (root / "TP" / "summary.json").write_text(json.dumps(summary))
+        notes = recommend(spec, root, log=lambda m: None)["notes"]
+        assert any("the model misfits TP's blocking test" in n for n in notes) == expected
+
+
 def test_thickness_model_is_within_10_percent_of_the_papers_table_5_measurement():
     # Table 5: the fiberglass composite (FC) muscle, 4 tubes of 15 mm, is at most 13 mm thick.
     assert thickness_m(PAPER_GEOMETRY, "FC") == pytest.approx(0.013, rel=0.10)
@@ -247,8 +262,11 @@ def test_the_recommended_operating_force_of_each_example_spec_matches_an_indepen
     shutil.copytree(results, root)
     # The specs' hysteresis and response-time requirements read metrics.json: fixed values suffice here.
     n = spec.n_draws
-    metrics = {"material": "TP", "draws": {"speed": [0.03] * n, "hysteresis_loss": [0.2] * n},
-               "summary": {"speed": {"from_prior": True}}}
+    metrics = {
+        "material": "TP",
+        "draws": {"speed": [0.03] * n, "hysteresis_loss": [0.2] * n},
+        "summary": {"speed": {"from_prior": True}},
+    }
     (root / "TP" / "metrics.json").write_text(json.dumps(metrics))
     report = recommend(spec_path, root, log=lambda m: None)
     top = report["candidates"][0]
