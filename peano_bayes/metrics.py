@@ -192,7 +192,7 @@ class ReadOff:
     """Where a Table 3 metric comes from: the fitted ``test`` whose signal it is read off, and ``per_signal``,
     the metric's change per unit change of that signal [metric unit per N, or per unit strain], as a function
     ``(values, test_pressure_pa, flat_length_m) -> scalar or (n,)`` of the draws' metrics ``values`` (metric
-    -> (n,)), the pressure the test was run at and the muscle's flat length; None where a misfit's size says
+    -> (n,)), the pressure the metrics are simulated at and the muscle's flat length; None where a misfit's size says
     nothing of the metric (a slope, a ratio of areas, a quantity of an unfitted test)."""
 
     test: str
@@ -250,12 +250,12 @@ def add_discrepancy(
     """Posterior predictive draws with the model discrepancy of the tests they are read off.
 
     ``values``: metric -> (n,) parameter-only draws [SI]; ``discrepancy``: test -> sd [signal unit]
-    (:func:`misfit_discrepancy`); ``test_pressure_pa`` [Pa] and ``flat_length_m`` [m]: the fitted test's
-    pressure and the muscle's length (:data:`READ_OFF`'s scales). Each draw of a metric :data:`READ_OFF` maps
-    gets an independent normal value of sd ``per_signal * sd``: the marginal predictive of an unknown smooth
-    misfit of that size at the point the metric is read. Returns (metric -> (n,) draws, metric -> (n,) sd added
-    [metric unit] for the metrics that got one, metrics whose test misfits but whose discrepancy is not carried).
-    """
+    (:func:`misfit_discrepancy`); ``test_pressure_pa`` [Pa] and ``flat_length_m`` [m]: the pressure the
+    metrics were simulated at and the muscle's length (:data:`READ_OFF`'s scales). Each draw of a metric
+    :data:`READ_OFF` maps gets an independent normal value of sd ``per_signal * sd``: the marginal predictive of
+    an unknown smooth misfit of that size at the point the metric is read. Returns (metric -> (n,) draws,
+    metric -> (n,) sd added [metric unit] for the metrics that got one, metrics whose test misfits but whose
+    discrepancy is not carried)."""
     draws, added, not_carried = dict(values), {}, []
     for name, source in READ_OFF.items():
         if name not in values or source.test not in discrepancy:
@@ -387,10 +387,10 @@ def posterior_metrics(
     iterator (e.g. ``tqdm``). ``test_pressure_pa``: simulate the protocol at this pressure instead of the
     material's own test pressure (to compare materials at one pressure). ``discrepancy``: test -> sd of its
     model discrepancy [signal unit] (:func:`misfit_discrepancy` of the result's ``summary.json``), added to the
-    metrics read off it (:func:`add_discrepancy`, at the material's own test pressure, where it was measured;
-    the normal values from ``seed``); None or empty: parameter draws alone."""
-    own = protocol_material(idata)
-    protocol = at_test_pressure(own, test_pressure_pa)
+    metrics read off it (:func:`add_discrepancy`; taken as the same size in the test's signal at the pressure
+    simulated, since it is one RMS over the pressures the test ran through; the normal values from ``seed``);
+    None or empty: parameter draws alone."""
+    protocol = at_test_pressure(protocol_material(idata), test_pressure_pa)
     config = result_config(idata)
     sets, prior_only = parameter_draws(idata, n_draws, seed, level=level)
     values = {name: np.full(n_draws, np.nan) for name in METRIC_UNITS}
@@ -406,11 +406,9 @@ def posterior_metrics(
     from_prior = STEP_METRICS if any(n in STEP_ONLY_PARAMETERS for n in prior_only) else ()
     draws, added, not_carried = values, {}, ()
     if discrepancy:
-        own_pressure_pa = (MATERIALS[own] if isinstance(own, str) else own).test_pressure_pa
+        pressure_pa = (MATERIALS[protocol] if isinstance(protocol, str) else protocol).test_pressure_pa
         rng = np.random.default_rng([seed, 1])
-        draws, added, not_carried = add_discrepancy(
-            values, discrepancy, own_pressure_pa, PAPER_GEOMETRY.flat_length_m, rng
-        )
+        draws, added, not_carried = add_discrepancy(values, discrepancy, pressure_pa, PAPER_GEOMETRY.flat_length_m, rng)
     material = idata.posterior.attrs["material"]
     return PosteriorMetrics(material, draws, failed, prior_only, from_prior, values, added, not_carried)
 

@@ -225,7 +225,7 @@ def test_each_metric_gets_the_discrepancy_of_the_test_it_is_read_off_at_its_scal
 @pytest.mark.slow
 def test_metrics_of_a_result_that_misfits_carry_its_discrepancy(result_dir, tmp_path):
     """A result whose ``summary.json`` says the blocking and load-cycle tests misfit with structure: the
-    blocking force's interval widens by the blocking excess over the test pressure (TP: 30 kPa), the
+    blocking force's interval widens by the blocking excess over the pressure simulated (TP's own: 30 kPa), the
     hysteresis keeps its parameter interval and is flagged, and the table says which is which."""
     import shutil
 
@@ -246,6 +246,9 @@ def test_metrics_of_a_result_that_misfits_carry_its_discrepancy(result_dir, tmp_
     assert stroke["discrepancy_sd"] is None and not stroke["misfit_not_carried"]
     table = metrics_markdown(out["material"], out["summary"], out["published"])
     assert "included: sd 100 from blocking" in table and "**not included** (load_cycle misfits)" in table
+    # At twice the pressure the same force misfit is half as large per MPa.
+    at_60 = evaluate_result(tmp_path, n_draws=3, progress=False, test_pressure_kpa=60)
+    assert at_60["summary"]["blocking_force_per_pressure"]["discrepancy_sd"] == pytest.approx(3.0 / 0.06)
 
 
 @pytest.mark.parametrize("content", ["[1, 2]", '{"residual_correlation": {"blocking": 3}}', "{not json"])
