@@ -1,0 +1,108 @@
+"""The tool's own Table 3 metrics on data from another physics, against what the rig would measure on it.
+
+``experiments/independent_data.py`` fits rig data made by Veale's force-balance model and checks two static
+quantities with the study script's own model-discrepancy term. This script asks the same of what a user reads:
+``peano-bayes metrics`` (:func:`peano_bayes.metrics.evaluate_result`) on that fitted result, at each of
+``FRACTIONS`` of FC's test pressure, with the discrepancy the tool adds where a fitted test misfits with
+structure (``metrics.READ_OFF``). The truth of each metric is what the rig measures on Veale's population muscle
+(Table 2 values, one specimen, no noise) under the same protocol at that pressure, by the same Table 3
+definitions (:func:`peano_bayes.metrics.dataset_metrics`), so both sides use one measurement rule (the free
+strain, for instance, extrapolates the relaxing load cycle from the start tension to zero force).
+
+Exploratory, not pre-registered: it reads the seed-1 result that ``independent_data.py`` already passed on.
+The data's load cycles were taken at FC's test pressure (200 kPa) only; at the lower pressures the load-cycle
+metrics (free strain, energy) extrapolate the fitted model.
+
+    python experiments/independent_metrics.py [--result DIR] [--draws N]
+
+Writes ``metrics_at_<P>kPa.json`` (and ``metrics.json``) into the result directory, as ``peano-bayes metrics``
+does; the last line printed is one JSON object.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from dataclasses import replace
+from pathlib import Path
+
+from peano_bayes.materials import MATERIALS
+from peano_bayes.metrics import NOISELESS, dataset_metrics, evaluate_result
+from peano_bayes.rig import simulate_veale_dataset
+
+MATERIAL = "FC"
+FRACTIONS = (0.25, 0.5, 0.75, 1.0)
+#: The metrics a static force-balance model defines (no hysteresis, no dynamics), and the stroke.
+QUANTITIES = ("blocking_force_per_pressure", "free_strain", "stroke", "energy_per_pressure")
+
+
+def rig_truth(pressure_pa: float) -> dict[str, float]:
+    """Table 3 metrics [SI] the rig measures on Veale's population muscle (Table 2) at ``pressure_pa``."""
+    spec = replace(MATERIALS[MATERIAL], test_pressure_pa=pressure_pa)
+    return dataset_metrics(simulate_veale_dataset(spec, noise=NOISELESS, specimen_spread=0.0, repeats=1, specimens=1))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument(
+        "--result",
+        type=Path,
+        default=Path("results-independent/veale-seed1"),
+        help="the result directory independent_data.py wrote (default results-independent/veale-seed1)",
+    )
+    parser.add_argument("--draws", type=int, default=100, help="posterior draws (default 100, as peano-bayes metrics)")
+    args = parser.parse_args()
+    if not (args.result / "summary.json").exists():
+        raise SystemExit(f"{args.result}: no summary.json; run experiments/independent_data.py first")
+    own_kpa = MATERIALS[MATERIAL].test_pressure_pa / 1e3
+    rows = []
+    for fraction in FRACTIONS:
+        kpa = fraction * own_kpa
+        common = None if fraction == 1.0 else kpa
+        out = evaluate_result(args.result, n_draws=args.draws, progress=False, test_pressure_kpa=common)
+        truth = rig_truth(1e3 * kpa)
+        for name in QUANTITIES:
+            s = out["summary"][name]
+            rows.append(
+                {
+                    "metric": name,
+                    "pressure_kpa": kpa,
+                    "truth": truth[name],
+                    "median": s["median"],
+                    "hdi_low": s["hdi_low"],
+                    "hdi_high": s["hdi_high"],
+                    "inside": bool(s["hdi_low"] <= truth[name] <= s["hdi_high"]),
+                    "parameter_hdi_low": s["parameter_hdi_low"],
+                    "parameter_hdi_high": s["parameter_hdi_high"],
+                    "inside_parameter_interval": bool(s["parameter_hdi_low"] <= truth[name] <= s["parameter_hdi_high"]),
+                    "discrepancy_sd": s["discrepancy_sd"],
+                    "discrepancy_test": s["discrepancy_test"],
+                }
+            )
+    print(f"{'metric':<30}{'p [kPa]':>8}{'truth':>10}{'median':>10}{'94 %, parameters':>24}{'94 %, tool':>24}  inside")
+    for r in rows:
+        parameters = f"[{r['parameter_hdi_low']:.4g}, {r['parameter_hdi_high']:.4g}]"
+        tool = f"[{r['hdi_low']:.4g}, {r['hdi_high']:.4g}]"
+        print(
+            f"{r['metric']:<30}{r['pressure_kpa']:>8.0f}{r['truth']:>10.4g}{r['median']:>10.4g}{parameters:>24}"
+            f"{tool:>24}  {'yes' if r['inside'] else 'NO'}"
+        )
+    at_own = [r for r in rows if r["pressure_kpa"] == own_kpa]
+    report = {
+        "result": str(args.result),
+        "draws": args.draws,
+        "total": len(rows),
+        "inside": sum(r["inside"] for r in rows),
+        "inside_parameter_interval": sum(r["inside_parameter_interval"] for r in rows),
+        "at_test_pressure": {
+            "total": len(at_own),
+            "inside": sum(r["inside"] for r in at_own),
+            "inside_parameter_interval": sum(r["inside_parameter_interval"] for r in at_own),
+        },
+        "checks": rows,
+    }
+    print(json.dumps(report))
+
+
+if __name__ == "__main__":
+    main()
