@@ -505,13 +505,25 @@ def metrics_command(args):
     print(metrics_markdown(out["material"], out["summary"], out["published"]))
     if out["prior_only"]:
         print(f"not informed by the fitted tests, drawn from the prior: {', '.join(out['prior_only'])}")
+    own, at = out["own_test_pressure_kpa"], out["test_pressure_kpa"]
+    if own is not None and at != own:
+        print(
+            f"simulated at {at:g} kPa; {out['material']} was tested at {own:g} kPa, so these metrics extrapolate its "
+            "fitted model; the free strain, energy and hysteresis most, since the rig's load cycles run at 0 kPa "
+            "and the test pressure only"
+        )
     return {k: v for k, v in out.items() if k != "draws"}
 
 
 def _metrics_arguments(p):
     p.add_argument("result", metavar="RESULT", help="a result directory of 'peano-bayes fit' (or its posterior.nc)")
     p.add_argument("--draws", type=int, default=100, help="posterior draws simulated (default: 100)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the prior draws of unfitted parameters (default: 0)")
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="seed of the draws (prior values of unfitted parameters, model discrepancy) (default: 0)",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--pressure-kpa", type=float, default=None, metavar="KPA", help=_PRESSURE_HELP)
 

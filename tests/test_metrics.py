@@ -136,6 +136,7 @@ def test_metrics_command_writes_metrics_json(result_dir, capsys):
     assert report["material"] == written["material"] == "TP" and written["n_draws"] == 3
     assert any(row["metric"] == "hysteresis_loss" for row in written["published"])
     assert "| metric | unit | median |" in captured.err  # the table a person reads, on stderr under --json
+    assert "extrapolate" not in captured.err  # at its own test pressure
 
 
 def test_metrics_at_a_common_pressure_go_to_their_own_file_and_follow_the_pressure(result_dir, capsys):
@@ -143,7 +144,7 @@ def test_metrics_at_a_common_pressure_go_to_their_own_file_and_follow_the_pressu
     (the pressure opens the tubes further), the file says which pressure, and the paper's values (given at the
     test pressure) are not compared."""
     assert main(["metrics", str(result_dir), "--draws", "3", "--no-progress", "--json", "--pressure-kpa", "60"]) == 0
-    capsys.readouterr()
+    assert "simulated at 60 kPa; TP was tested at 30 kPa, so these metrics extrapolate" in capsys.readouterr().err
     at_60 = json.loads((result_dir / "metrics_at_60kPa.json").read_text())
     assert at_60["test_pressure_kpa"] == 60.0 and at_60["own_test_pressure_kpa"] == 30.0 and at_60["published"] == []
     from peano_bayes.metrics import evaluate_result
