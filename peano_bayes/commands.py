@@ -552,10 +552,10 @@ def rank_command(args):
 
     common = _pressure_kpa(args.pressure_kpa)
     if common is not None:
-        from .metrics import evaluate_result, metrics_file
+        from .metrics import evaluate_result, metrics_current
 
         for path in args.results:  # metrics at the common pressure, simulated once per result and kept
-            if Path(path).is_dir() and not metrics_file(path, common).exists():
+            if Path(path).is_dir() and not metrics_current(path, common):
                 evaluate_result(path, test_pressure_kpa=common, progress=True)
     metrics = [read_metrics(path, common) for path in args.results]  # validate every input before writing
     codes = [m["material"] for m in metrics]

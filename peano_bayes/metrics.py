@@ -189,43 +189,53 @@ def model_metrics(material, params: dict, *, config: ModelConfig = DEFAULT_CONFI
 
 @dataclass(frozen=True)
 class ReadOff:
-    """Where a Table 3 metric comes from: the fitted ``test`` whose signal it is read off, and ``per_signal``,
-    the metric's change per unit change of that signal [metric unit per N, or per unit strain], as a function
-    ``(values, test_pressure_pa, flat_length_m) -> scalar or (n,)`` of the draws' metrics ``values`` (metric
-    -> (n,)), the pressure the metrics are simulated at and the muscle's flat length; None where a misfit's size says
-    nothing of the metric (a slope, a ratio of areas, a quantity of an unfitted test)."""
+    """One fitted ``test`` a Table 3 metric is read off, and ``per_signal``, the metric's change per unit change of
+    that test's signal [metric unit per N, or per unit strain], as a function ``(values, pressure_pa,
+    flat_length_m) -> scalar or (n,)`` of the draws' metrics ``values`` (metric -> (n,) [SI]), the pressure the
+    metrics are simulated at [Pa] and the muscle's flat length [m]; None where a misfit's size says nothing of the
+    metric (a slope, a ratio of areas, a quantity of an unfitted test)."""
 
     test: str
     per_signal: Callable | None = None
 
 
-def _per_mpa(values, test_pressure_pa, flat_length_m):
-    return m.PA_PER_MPA / test_pressure_pa
+def _per_mpa(values, pressure_pa, flat_length_m):
+    """[1/MPa]: a force per MPa moves by 1 / p [MPa] per newton of force."""
+    return m.PA_PER_MPA / pressure_pa
 
 
-def _strain(values, test_pressure_pa, flat_length_m):
+def _strain(values, pressure_pa, flat_length_m):
+    """[-]: a strain the test measures directly moves with it."""
     return 1.0
 
 
-def _energy(values, test_pressure_pa, flat_length_m):
-    # A force error of mean d over the contraction from 0 to the free strain changes the work by d eps L0, and
-    # |d| is at most the error's RMS there: roughly the misfit's RMS over the test.
-    return np.abs(values["free_strain"]) * flat_length_m * m.PA_PER_MPA / test_pressure_pa
+def _free_strain_per_newton(values, pressure_pa, flat_length_m):
+    """[1/N]: where the relaxing load cycle crosses zero force, a force misfit moves the crossing by itself over
+    the branch's slope, taken as the secant from the blocking force at zero strain to zero force at the free
+    strain (rough: the branch is curved)."""
+    blocking_n = values["blocking_force_per_pressure"] * pressure_pa / m.PA_PER_MPA
+    return np.abs(values["free_strain"]) / blocking_n
 
 
-#: Metric -> :class:`ReadOff`. The blocking force is the blocking test's force at its top pressure, the stroke
-#: the stroke test's strain; the free strain is the static contraction at low load, which the stroke test
-#: measures as strain directly (the load cycles see it through the force and its slope); the energy integrates
-#: the load cycle's force over the contraction. Stiffness and hysteresis (a slope, a ratio of areas) and the
-#: step metrics are not carried.
+def _energy(values, pressure_pa, flat_length_m):
+    """[J/MPa per N]: a force error of mean d over the contraction from 0 to the free strain moves the work by
+    d eps L0; d is taken as the size of the test's misfit (rough: that is one RMS over all the load cycles)."""
+    return np.abs(values["free_strain"]) * flat_length_m * m.PA_PER_MPA / pressure_pa
+
+
+#: Metric -> the :class:`ReadOff` of each fitted test it is read off. The blocking force is the blocking test's
+#: force at its top pressure, the stroke the stroke test's strain; the free strain is where the load cycle's force
+#: reaches zero, a static contraction at low load that the stroke test also measures as strain; the energy
+#: integrates the load cycle's force over the contraction. Stiffness and hysteresis (a slope, a ratio of areas)
+#: and the step metrics are not carried.
 READ_OFF = {
-    STIFFNESS: ReadOff("load_cycle"),
-    "hysteresis_loss": ReadOff("load_cycle"),
-    "free_strain": ReadOff("stroke", _strain),
-    "energy_per_pressure": ReadOff("load_cycle", _energy),
-    "blocking_force_per_pressure": ReadOff("blocking", _per_mpa),
-    "stroke": ReadOff("stroke", _strain),
-    **{name: ReadOff("step") for name in STEP_METRICS},
+    STIFFNESS: (ReadOff("load_cycle"),),
+    "hysteresis_loss": (ReadOff("load_cycle"),),
+    "free_strain": (ReadOff("load_cycle", _free_strain_per_newton), ReadOff("stroke", _strain)),
+    "energy_per_pressure": (ReadOff("load_cycle", _energy),),
+    "blocking_force_per_pressure": (ReadOff("blocking", _per_mpa),),
+    "stroke": (ReadOff("stroke", _strain),),
+    **{name: (ReadOff("step"),) for name in STEP_METRICS},
 }
 
 
@@ -245,28 +255,34 @@ def misfit_discrepancy(summary: dict) -> dict[str, float]:
 
 
 def add_discrepancy(
-    values: dict, discrepancy: dict, test_pressure_pa: float, flat_length_m: float, rng: np.random.Generator
+    values: dict, discrepancy: dict, pressure_pa: float, flat_length_m: float, rng: np.random.Generator
 ) -> tuple[dict, dict, tuple]:
     """Posterior predictive draws with the model discrepancy of the tests they are read off.
 
     ``values``: metric -> (n,) parameter-only draws [SI]; ``discrepancy``: test -> sd [signal unit]
-    (:func:`misfit_discrepancy`); ``test_pressure_pa`` [Pa] and ``flat_length_m`` [m]: the pressure the
-    metrics were simulated at and the muscle's length (:data:`READ_OFF`'s scales). Each draw of a metric
-    :data:`READ_OFF` maps gets an independent normal value of sd ``per_signal * sd``: the marginal predictive of
-    an unknown smooth misfit of that size at the point the metric is read. Returns (metric -> (n,) draws,
-    metric -> (n,) sd added [metric unit] for the metrics that got one, metrics whose test misfits but whose
-    discrepancy is not carried)."""
+    (:func:`misfit_discrepancy`); ``pressure_pa`` [Pa] and ``flat_length_m`` [m]: the pressure the metrics were
+    simulated at and the muscle's length (:data:`READ_OFF`'s scales). A metric :data:`READ_OFF` maps onto a
+    misfit test gets, per draw, ``per_signal * sd`` times a standard normal value: the marginal predictive of an
+    unknown smooth misfit of that size where the metric is read. One normal value per test and draw, so metrics
+    read off one test move together; a metric read off several misfit tests takes the one whose sd is largest
+    (median over draws). Returns (metric -> (n,) draws, metric -> (test, (n,) sd added [metric unit]) for the
+    metrics that got one, metrics whose tests misfit but whose discrepancy none of them sizes)."""
+    n = len(next(iter(values.values())))
+    z = {test: rng.standard_normal(n) for test in sorted(discrepancy)}
     draws, added, not_carried = dict(values), {}, []
-    for name, source in READ_OFF.items():
-        if name not in values or source.test not in discrepancy:
-            continue
-        if source.per_signal is None:
+    for name, sources in READ_OFF.items():
+        applicable = [r for r in sources if r.test in discrepancy] if name in values else []
+        sized = []
+        for r in applicable:
+            if r.per_signal is not None:
+                scale = np.abs(r.per_signal(values, pressure_pa, flat_length_m))
+                sized.append((r.test, np.broadcast_to(scale * discrepancy[r.test], (n,))))
+        if sized:
+            test, sd = max(sized, key=lambda item: np.nan_to_num(np.nanmedian(item[1]), nan=-1.0))
+            draws[name] = values[name] + sd * z[test]
+            added[name] = (test, sd)
+        elif applicable:
             not_carried.append(name)
-            continue
-        scale = np.abs(source.per_signal(values, test_pressure_pa, flat_length_m))
-        sd = np.broadcast_to(scale * discrepancy[source.test], np.shape(values[name]))
-        draws[name] = values[name] + sd * rng.standard_normal(sd.shape)
-        added[name] = sd
     return draws, added, tuple(not_carried)
 
 
@@ -280,7 +296,7 @@ class PosteriorMetrics:
     undefined; ``n_failed`` draws whose physics did not converge; ``prior_only`` parameters the posterior does
     not hold (not informed by the fitted tests), drawn from the prior; ``from_prior`` metrics that depend on
     them (e.g. the step metrics when the step test was not fitted); ``parameter_draws`` metric -> (n,) the
-    parameter draws' metrics alone; ``discrepancy_sd`` metric -> (n,) sd added [metric unit];
+    parameter draws' metrics alone; ``discrepancy`` metric -> (test, (n,) sd added [metric unit]);
     ``not_carried`` metrics whose fitted test misfits but whose discrepancy has no size in the metric.
     """
 
@@ -290,27 +306,28 @@ class PosteriorMetrics:
     prior_only: tuple
     from_prior: tuple
     parameter_draws: dict
-    discrepancy_sd: dict
+    discrepancy: dict
     not_carried: tuple
 
     def summary(self, hdi_prob: float = 0.94) -> dict:
         """metric -> ``median``, ``hdi_low``, ``hdi_high`` (arviz HDI of ``draws``: what a designer reads),
-        ``parameter_hdi_low``, ``parameter_hdi_high`` (of ``parameter_draws``), ``discrepancy_sd`` (median sd
-        added [metric unit], None if none), ``discrepancy_test`` (the test it comes from, None if none),
-        ``misfit_not_carried``, ``unit``, ``n`` (finite draws) and ``from_prior``."""
+        ``parameter_median``, ``parameter_hdi_low``, ``parameter_hdi_high`` (of ``parameter_draws``),
+        ``discrepancy_sd`` (median sd added [metric unit], None if none), ``discrepancy_test`` (the test it
+        comes from, None if none), ``misfit_not_carried``, ``unit``, ``n`` (finite draws) and ``from_prior``."""
         out = {}
         for name, values in self.draws.items():
             median, low, high = _median_hdi(values, hdi_prob)
-            _, p_low, p_high = _median_hdi(self.parameter_draws[name], hdi_prob)
-            sd = self.discrepancy_sd.get(name)
+            p_median, p_low, p_high = _median_hdi(self.parameter_draws[name], hdi_prob)
+            test, sd = self.discrepancy.get(name, (None, None))
             out[name] = {
                 "median": median,
                 "hdi_low": low,
                 "hdi_high": high,
+                "parameter_median": p_median,
                 "parameter_hdi_low": p_low,
                 "parameter_hdi_high": p_high,
-                "discrepancy_sd": None if sd is None else float(np.median(sd)),
-                "discrepancy_test": None if sd is None else READ_OFF[name].test,
+                "discrepancy_sd": None if sd is None else float(np.nanmedian(sd)),
+                "discrepancy_test": test,
                 "misfit_not_carried": name in self.not_carried,
                 "unit": METRIC_UNITS[name],
                 "n": int(np.isfinite(values).sum()),
@@ -387,9 +404,10 @@ def posterior_metrics(
     iterator (e.g. ``tqdm``). ``test_pressure_pa``: simulate the protocol at this pressure instead of the
     material's own test pressure (to compare materials at one pressure). ``discrepancy``: test -> sd of its
     model discrepancy [signal unit] (:func:`misfit_discrepancy` of the result's ``summary.json``), added to the
-    metrics read off it (:func:`add_discrepancy`; taken as the same size in the test's signal at the pressure
-    simulated, since it is one RMS over the pressures the test ran through; the normal values from ``seed``);
-    None or empty: parameter draws alone."""
+    metrics read off it (:func:`add_discrepancy`; the normal values from ``seed``): one RMS over the pressures
+    the test ran through, so taken as the same size in the test's signal at a pressure up to the material's
+    test pressure, and as growing in proportion to pressure above it, where the model extrapolates. None or
+    empty: parameter draws alone."""
     protocol = at_test_pressure(protocol_material(idata), test_pressure_pa)
     config = result_config(idata)
     sets, prior_only = parameter_draws(idata, n_draws, seed, level=level)
@@ -406,9 +424,13 @@ def posterior_metrics(
     from_prior = STEP_METRICS if any(n in STEP_ONLY_PARAMETERS for n in prior_only) else ()
     draws, added, not_carried = values, {}, ()
     if discrepancy:
-        pressure_pa = (MATERIALS[protocol] if isinstance(protocol, str) else protocol).test_pressure_pa
+        pressure_pa, tested_pa = (
+            (MATERIALS[p] if isinstance(p, str) else p).test_pressure_pa for p in (protocol, protocol_material(idata))
+        )
+        growth = max(1.0, pressure_pa / tested_pa)
+        at_pressure = {test: sd * growth for test, sd in discrepancy.items()}
         rng = np.random.default_rng([seed, 1])
-        draws, added, not_carried = add_discrepancy(values, discrepancy, pressure_pa, PAPER_GEOMETRY.flat_length_m, rng)
+        draws, added, not_carried = add_discrepancy(values, at_pressure, pressure_pa, PAPER_GEOMETRY.flat_length_m, rng)
     material = idata.posterior.attrs["material"]
     return PosteriorMetrics(material, draws, failed, prior_only, from_prior, values, added, not_carried)
 
@@ -457,7 +479,8 @@ def metrics_markdown(material: str, summary: dict, comparison: list[dict]) -> st
         if s.get("discrepancy_sd") is not None:
             misfit = f"included: sd {format_number(s['discrepancy_sd'])} from {s['discrepancy_test']}"
         elif s.get("misfit_not_carried"):
-            misfit = f"**not included** ({READ_OFF[name].test} misfits)"
+            tests = ", ".join(r.test for r in READ_OFF[name])
+            misfit = f"**not included** ({tests} misfits)"
         lines.append(
             f"| {name}{flag} | {s['unit']} | {format_number(s['median'])} | "
             f"{format_number(s['hdi_low'])} to {format_number(s['hdi_high'])} | {pub} | {inside} | {misfit} |"
@@ -556,17 +579,27 @@ def _read_json(file: Path) -> dict:
     return out
 
 
+def metrics_current(directory: str | Path, test_pressure_kpa: float | None = None) -> bool:
+    """Whether a result directory holds metrics (:func:`metrics_file`) written by this version, which records
+    the ``discrepancy`` it added (an older file's intervals are of the parameters alone): callers that keep
+    metrics across runs recompute the others."""
+    file = metrics_file(directory, test_pressure_kpa)
+    if not file.exists():
+        return False
+    try:
+        return "discrepancy" in json.loads(file.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError):
+        return False
+
+
 def read_metrics(path: str | Path, test_pressure_kpa: float | None = None) -> dict:
     """The metrics of a result directory (see :func:`evaluate_result`; :func:`metrics_file` for which file), or
     of the metrics file ``path``."""
     path = Path(path)
     file = metrics_file(path, test_pressure_kpa) if path.is_dir() else path
-    try:
-        out = json.loads(file.read_text())
-    except FileNotFoundError:
-        raise PeanoBayesInputError(f"{file}: no such file; run 'peano-bayes metrics {path}' first") from None
-    except json.JSONDecodeError as err:
-        raise PeanoBayesInputError(f"{file}: not valid JSON ({err})") from None
-    if not isinstance(out, dict) or "draws" not in out or "material" not in out:
+    if not file.exists():
+        raise PeanoBayesInputError(f"{file}: no such file; run 'peano-bayes metrics {path}' first")
+    out = _read_json(file)
+    if "draws" not in out or "material" not in out:
         raise PeanoBayesInputError(f"{file}: lacks 'material' or 'draws'; rerun 'peano-bayes metrics {path}'")
     return out

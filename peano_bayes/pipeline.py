@@ -839,11 +839,12 @@ def report_results(out_dir: str | Path, materials=BUNDLED_MATERIALS, *, n_draws:
     """Metrics, figures, ranking and ``index.md`` for the finished materials of ``out_dir``.
 
     Per material with a ``summary.json``: ``metrics.json`` (:func:`~peano_bayes.metrics.evaluate_result`, kept
-    if present) and ``figures/``; across them: ``ranking.json``/``ranking.md``, ``figures/`` and ``index.md``.
+    if written by this version: :func:`~peano_bayes.metrics.metrics_current`) and ``figures/``; across them:
+    ``ranking.json``/``ranking.md``, ``figures/`` and ``index.md``.
     Returns the ranking (:func:`~peano_bayes.ranking.rank_materials`)."""
     from .figures import cross_material_figures, material_figures
     from .inference.results import load_result
-    from .metrics import evaluate_result, read_metrics
+    from .metrics import evaluate_result, metrics_current, read_metrics
     from .ranking import rank_materials, ranking_markdown
 
     out_dir = Path(out_dir)
@@ -853,7 +854,7 @@ def report_results(out_dir: str | Path, materials=BUNDLED_MATERIALS, *, n_draws:
         directory = out_dir / code
         summaries.append(json.loads((directory / "summary.json").read_text()))
         references[code] = reference_models(directory, summaries[-1], log=log)
-        if not (directory / "metrics.json").exists():
+        if not metrics_current(directory):
             log(f"{code}: Table 3 metrics from {n_draws} posterior draws ...")
             evaluate_result(directory, n_draws=n_draws, progress=False)
         metrics[code] = read_metrics(directory)

@@ -515,8 +515,8 @@ def recommend(
         if tests:
             notes.append(
                 f"the model misfits {code}'s {', '.join(tests)} test beyond the sensor noise (residuals with "
-                "structure): its force predictions and probabilities are of the closest model and do not include "
-                "that misfit"
+                "structure): its predictions and probabilities are the closest model's and do not include that "
+                "misfit"
             )
     unconverged = [c for c, (idata, _) in materials.items() if not idata.posterior.attrs.get("converged", 1)]
     if unconverged:

@@ -158,7 +158,7 @@ def test_metrics_at_a_common_pressure_go_to_their_own_file_and_follow_the_pressu
 
 # --- model discrepancy: a misfit test's excess widens what is read off it -----------------------------------
 
-#: sd of a standard normal's 94 % HDI half-width: the central interval of a normal is its HDI.
+#: Half-width of a normal's 94 % HDI in sd (its 97 % quantile): the central interval of a normal is its HDI.
 Z94 = 1.8807936081512509
 
 
@@ -186,39 +186,47 @@ def test_misfit_discrepancy_is_the_excess_of_the_tests_that_misfit_with_structur
 
 
 def test_each_metric_gets_the_discrepancy_of_the_test_it_is_read_off_at_its_scale():
-    """Constant parameter draws, so the predictive spread is the discrepancy alone: the blocking force per MPa
-    carries the blocking test's force misfit over the test pressure, stroke and free strain the stroke test's
-    strain misfit, the energy a force misfit over the contraction; slopes and area ratios are flagged, and a
-    metric of a test that fits keeps its draws."""
+    """The predictive spread over the parameter draws is the discrepancy alone: the blocking force per MPa carries
+    the blocking test's force misfit over the pressure, the stroke the stroke test's strain misfit, the energy a
+    force misfit times the free strain and length over the pressure, and the free strain the larger of the stroke
+    test's strain misfit and the load cycle's force misfit over the secant slope; slopes and area ratios are
+    flagged, a metric of a test that fits keeps its draws, and metrics read off one test move together."""
     from peano_bayes.metrics import METRIC_UNITS, add_discrepancy
 
-    n = 40_000
+    n, pressure_pa, length_m = 40_000, 1.5e5, 0.05
+    rng = np.random.default_rng(11)
     values = {name: np.full(n, 0.5) for name in METRIC_UNITS}
-    values["free_strain"] = np.full(n, 0.2)
-    force_n, strain, pressure_pa, length_m = 2.0, 0.004, 2e5, 0.05
-    draws, added, not_carried = add_discrepancy(
-        values,
-        {"blocking": force_n, "load_cycle": force_n, "stroke": strain},
-        pressure_pa,
-        length_m,
-        np.random.default_rng(3),
-    )
-    expected = {
-        "blocking_force_per_pressure": force_n / 0.2,  # N over MPa
-        "stroke": strain,
-        "free_strain": strain,
-        "energy_per_pressure": force_n * 0.2 * length_m / 0.2,  # N x strain x m over MPa
-    }
-    for name, sd in expected.items():
-        np.testing.assert_allclose(added[name], sd, rtol=1e-12, err_msg=name)
-        spread = draws[name] - values[name]
-        assert abs(np.mean(spread)) < 4 * sd / np.sqrt(n), name
-        assert abs(np.std(spread) / sd - 1) < 0.02, name  # se of a sample sd at n = 40000: 0.35 %
-        low, high = az.hdi(draws[name], hdi_prob=0.94)
-        assert abs((high - low) / (2 * Z94 * sd) - 1) < 0.03, name
-    assert set(not_carried) == {"stiffness_at_minus_1.5pct_0kPa", "hysteresis_loss"}
-    for name in set(METRIC_UNITS) - set(expected):
-        assert draws[name] is values[name], name
+    values["free_strain"] = rng.uniform(0.1, 0.3, n)
+    values["blocking_force_per_pressure"] = rng.uniform(400.0, 800.0, n)  # N/MPa: 60-120 N at 0.15 MPa
+    eps, blocking_n = values["free_strain"], values["blocking_force_per_pressure"] * 0.15
+    for load_cycle_n, free_strain_from in ((1.0, "stroke"), (5.0, "load_cycle")):
+        misfit = {"blocking": 2.0, "load_cycle": load_cycle_n, "stroke": 0.004}
+        draws, added, not_carried = add_discrepancy(values, misfit, pressure_pa, length_m, np.random.default_rng(3))
+        expected = {
+            "blocking_force_per_pressure": ("blocking", np.full(n, 2.0 / 0.15)),  # N over MPa
+            "stroke": ("stroke", np.full(n, 0.004)),
+            "energy_per_pressure": ("load_cycle", load_cycle_n * eps * length_m / 0.15),  # N x strain x m / MPa
+            "free_strain": {
+                "stroke": ("stroke", np.full(n, 0.004)),
+                "load_cycle": ("load_cycle", load_cycle_n * eps / blocking_n),  # N over N per unit strain
+            }[free_strain_from],
+        }
+        assert set(added) == set(expected)
+        for name, (test, sd) in expected.items():
+            assert added[name][0] == test, name
+            np.testing.assert_allclose(added[name][1], sd, rtol=1e-12, err_msg=name)
+            z = (draws[name] - values[name]) / sd
+            assert abs(np.mean(z)) < 4 / np.sqrt(n), name
+            assert abs(np.std(z) - 1) < 0.02, name  # se of a sample sd at n = 40000: 0.35 %
+        low, high = az.hdi(draws["stroke"], hdi_prob=0.94)  # constant draws plus one normal
+        assert abs((high - low) / (2 * Z94 * 0.004) - 1) < 0.03
+        z = {name: (draws[name] - values[name]) / added[name][1] for name in expected}
+        shares = {"stroke": "stroke", "load_cycle": "energy_per_pressure"}[free_strain_from]  # same test
+        np.testing.assert_allclose(z["free_strain"], z[shares], rtol=1e-9)
+        assert abs(np.corrcoef(z["stroke"], z["blocking_force_per_pressure"])[0, 1]) < 4 / np.sqrt(n)
+        assert set(not_carried) == {"stiffness_at_minus_1.5pct_0kPa", "hysteresis_loss"}
+        for name in set(METRIC_UNITS) - set(expected):
+            assert draws[name] is values[name], name
     unchanged, none, _ = add_discrepancy(values, {}, pressure_pa, length_m, np.random.default_rng(3))
     assert none == {} and all(unchanged[k] is values[k] for k in values)
 
@@ -247,9 +255,11 @@ def test_metrics_of_a_result_that_misfits_carry_its_discrepancy(result_dir, tmp_
     assert stroke["discrepancy_sd"] is None and not stroke["misfit_not_carried"]
     table = metrics_markdown(out["material"], out["summary"], out["published"])
     assert "included: sd 100 from blocking" in table and "**not included** (load_cycle misfits)" in table
-    # At twice the pressure the same force misfit is half as large per MPa.
-    at_60 = evaluate_result(tmp_path, n_draws=3, progress=False, test_pressure_kpa=60)
-    assert at_60["summary"]["blocking_force_per_pressure"]["discrepancy_sd"] == pytest.approx(3.0 / 0.06)
+    # Below the tested pressure the misfit keeps its size in newtons (twice as large per MPa at half the
+    # pressure); above it, it grows with the pressure (the same per MPa).
+    for kpa, per_mpa in ((15, 3.0 / 0.015), (60, 3.0 / 0.03)):
+        at = evaluate_result(tmp_path, n_draws=3, progress=False, test_pressure_kpa=kpa)
+        assert at["summary"]["blocking_force_per_pressure"]["discrepancy_sd"] == pytest.approx(per_mpa), kpa
 
 
 @pytest.mark.parametrize("content", ["[1, 2]", '{"residual_correlation": {"blocking": 3}}', "{not json"])
