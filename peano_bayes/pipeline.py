@@ -459,6 +459,7 @@ def infer(
                     "for AR(1) residuals)"
                 )
                 + ("" if conv.converged else "; the run has not converged, so its mean may not be a fit yet")
+                + "; 'peano-bayes metrics' adds its misfit beyond the sensor noise to the metrics read off it"
             )
     summary = {
         "material": code,
