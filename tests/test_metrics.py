@@ -272,3 +272,15 @@ def test_a_malformed_summary_beside_the_result_exits_2_naming_it(result_dir, tmp
     err = capsys.readouterr().err
     assert str(tmp_path / "summary.json") in err and "Traceback" not in err
     assert not (tmp_path / "metrics.json").exists()
+
+
+def test_metrics_written_before_the_discrepancy_existed_are_not_current(tmp_path):
+    from peano_bayes.metrics import metrics_current
+
+    assert not metrics_current(tmp_path)  # none yet
+    (tmp_path / "metrics.json").write_text(json.dumps({"material": "TP", "draws": {}}))
+    assert not metrics_current(tmp_path)  # an older file: its intervals are the parameters' alone
+    (tmp_path / "metrics.json").write_text(json.dumps({"material": "TP", "draws": {}, "discrepancy": {}}))
+    assert metrics_current(tmp_path) and not metrics_current(tmp_path, 60.0)  # the common pressure's file is apart
+    (tmp_path / "metrics.json").write_text("{half")
+    assert not metrics_current(tmp_path)
