@@ -547,16 +547,16 @@ metrics_command.arguments = _metrics_arguments
 def rank_command(args):
 
     from .atomic import write_text
-    from .metrics import read_metrics
+    from .metrics import evaluate_result, metrics_current, metrics_file, previous_draws, read_metrics
     from .ranking import rank_materials, ranking_markdown
 
     common = _pressure_kpa(args.pressure_kpa)
-    if common is not None:
-        from .metrics import evaluate_result, metrics_current
-
-        for path in args.results:  # metrics at the common pressure, simulated once per result and kept
-            if Path(path).is_dir() and not metrics_current(path, common):
-                evaluate_result(path, test_pressure_kpa=common, progress=True)
+    for path in args.results:  # metrics simulated once per result and kept; an older version's recomputed
+        if not Path(path).is_dir() or metrics_current(path, common):
+            continue
+        stale = (Path(path) / "posterior.nc").exists() and metrics_file(path).exists()
+        if common is not None or stale:  # a result without metrics.json at its own pressure is refused below
+            evaluate_result(path, n_draws=previous_draws(path, common), test_pressure_kpa=common, progress=True)
     metrics = [read_metrics(path, common) for path in args.results]  # validate every input before writing
     codes = [m["material"] for m in metrics]
     twice = sorted({c for c in codes if codes.count(c) > 1})

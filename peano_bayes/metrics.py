@@ -48,9 +48,14 @@ from .inference.fit import structured_tests
 from .inference.posterior import STEP_ONLY_PARAMETERS
 from .inference.results import load_result, parameter_draws, result_config
 from .materials import MATERIALS, MaterialSpec
+from .materials import material as material_spec
 from .physics import DEFAULT_CONFIG, PAPER_GEOMETRY, Geometry, LoadCycle, ModelConfig, simulate_load_cycle
 from .physics import metrics as m
 from .rig import RigNoise, RigSimulationError, apply_quirks, simulate_dataset
+
+#: Version of what ``metrics.json`` holds, raised when the same result would give other metrics (2: the model
+#: discrepancy of misfit tests added, one normal per test, growing above the tested pressure).
+METRICS_VERSION = 2
 
 #: Savitzky-Golay window of the step-response smoothing [s] (order 3); 15 ms at 1 kHz is 15 samples.
 STEP_SMOOTHING_S = 0.015
@@ -265,7 +270,8 @@ def add_discrepancy(
     misfit test gets, per draw, ``per_signal * sd`` times a standard normal value: the marginal predictive of an
     unknown smooth misfit of that size where the metric is read. One normal value per test and draw, so metrics
     read off one test move together; a metric read off several misfit tests takes the one whose sd is largest
-    (median over draws). Returns (metric -> (n,) draws, metric -> (test, (n,) sd added [metric unit]) for the
+    (median over draws); a draw whose scale is not finite (e.g. its blocking force failed) takes the median sd
+    of the others. Returns (metric -> (n,) draws, metric -> (test, (n,) sd added [metric unit]) for the
     metrics that got one, metrics whose tests misfit but whose discrepancy none of them sizes)."""
     n = len(next(iter(values.values())))
     z = {test: rng.standard_normal(n) for test in sorted(discrepancy)}
@@ -274,11 +280,18 @@ def add_discrepancy(
         applicable = [r for r in sources if r.test in discrepancy] if name in values else []
         sized = []
         for r in applicable:
-            if r.per_signal is not None:
-                scale = np.abs(r.per_signal(values, pressure_pa, flat_length_m))
-                sized.append((r.test, np.broadcast_to(scale * discrepancy[r.test], (n,))))
+            if r.per_signal is None:
+                continue
+            with np.errstate(divide="ignore", invalid="ignore"):
+                sd = (
+                    np.broadcast_to(np.abs(r.per_signal(values, pressure_pa, flat_length_m)), (n,))
+                    * discrepancy[r.test]
+                )
+            finite = np.isfinite(sd)
+            if finite.any():  # a draw whose scale is undefined (a failed blocking force) takes the median's
+                sized.append((r.test, np.where(finite, sd, np.median(sd[finite]))))
         if sized:
-            test, sd = max(sized, key=lambda item: np.nan_to_num(np.nanmedian(item[1]), nan=-1.0))
+            test, sd = max(sized, key=lambda item: np.median(item[1]))
             draws[name] = values[name] + sd * z[test]
             added[name] = (test, sd)
         elif applicable:
@@ -326,7 +339,7 @@ class PosteriorMetrics:
                 "parameter_median": p_median,
                 "parameter_hdi_low": p_low,
                 "parameter_hdi_high": p_high,
-                "discrepancy_sd": None if sd is None else float(np.nanmedian(sd)),
+                "discrepancy_sd": None if sd is None else float(np.median(sd)),
                 "discrepancy_test": test,
                 "misfit_not_carried": name in self.not_carried,
                 "unit": METRIC_UNITS[name],
@@ -375,8 +388,7 @@ def at_test_pressure(protocol: str | MaterialSpec, test_pressure_pa: float | Non
         return protocol
     if not (math.isfinite(test_pressure_pa) and test_pressure_pa > 0):
         raise PeanoBayesInputError(f"a test pressure must be a positive number of Pa, got {test_pressure_pa}")
-    spec = MATERIALS[protocol] if isinstance(protocol, str) else protocol
-    return replace(spec, test_pressure_pa=float(test_pressure_pa))
+    return replace(material_spec(protocol), test_pressure_pa=float(test_pressure_pa))
 
 
 def metrics_file(directory: str | Path, test_pressure_kpa: float | None = None) -> Path:
@@ -408,7 +420,8 @@ def posterior_metrics(
     the test ran through, so taken as the same size in the test's signal at a pressure up to the material's
     test pressure, and as growing in proportion to pressure above it, where the model extrapolates. None or
     empty: parameter draws alone."""
-    protocol = at_test_pressure(protocol_material(idata), test_pressure_pa)
+    own = protocol_material(idata)
+    protocol = at_test_pressure(own, test_pressure_pa)
     config = result_config(idata)
     sets, prior_only = parameter_draws(idata, n_draws, seed, level=level)
     values = {name: np.full(n_draws, np.nan) for name in METRIC_UNITS}
@@ -424,9 +437,7 @@ def posterior_metrics(
     from_prior = STEP_METRICS if any(n in STEP_ONLY_PARAMETERS for n in prior_only) else ()
     draws, added, not_carried = values, {}, ()
     if discrepancy:
-        pressure_pa, tested_pa = (
-            (MATERIALS[p] if isinstance(p, str) else p).test_pressure_pa for p in (protocol, protocol_material(idata))
-        )
+        pressure_pa, tested_pa = (material_spec(p).test_pressure_pa for p in (protocol, own))
         growth = max(1.0, pressure_pa / tested_pa)
         at_pressure = {test: sd * growth for test, sd in discrepancy.items()}
         rng = np.random.default_rng([seed, 1])
@@ -511,11 +522,12 @@ def evaluate_result(
     ``test_pressure_kpa`` (the pressure its metrics are simulated at; ``None`` if unknown),
     ``own_test_pressure_kpa`` (the material's), ``n_draws``, ``n_failed``, ``prior_only``, ``summary``
     (:meth:`PosteriorMetrics.summary`), ``published`` (:func:`compare_published`, empty away from the own test
-    pressure: the paper's values are at that pressure), ``discrepancy`` (test -> sd [signal unit] of the model
-    discrepancy added to the metrics read off it, :func:`misfit_discrepancy` of the ``summary.json`` beside
-    the result; empty without one or where the model explains the data) and ``draws`` (metric -> list of
-    predictive values, for :mod:`peano_bayes.ranking`). ``test_pressure_kpa``: a common pressure [kPa]
-    instead of the material's own."""
+    pressure: the paper's values are at that pressure), ``discrepancy`` (test -> the misfit beyond the sensor
+    noise [signal unit] that :func:`posterior_metrics` adds to the metrics read off it, as measured, before any
+    growth above the tested pressure: :func:`misfit_discrepancy` of the ``summary.json`` beside the result;
+    empty without one or where the model explains the data), ``version`` (:data:`METRICS_VERSION`) and
+    ``draws`` (metric -> list of predictive values, for :mod:`peano_bayes.ranking`). ``test_pressure_kpa``: a
+    common pressure [kPa] instead of the material's own."""
     from tqdm.auto import tqdm
 
     from .atomic import write_text
@@ -537,6 +549,7 @@ def evaluate_result(
     )
     summary = result.summary(hdi_prob)
     out = {
+        "version": METRICS_VERSION,
         "material": material,
         "test_pressure_kpa": own if common is None else common,
         "own_test_pressure_kpa": own,
@@ -580,16 +593,27 @@ def _read_json(file: Path) -> dict:
 
 
 def metrics_current(directory: str | Path, test_pressure_kpa: float | None = None) -> bool:
-    """Whether a result directory holds metrics (:func:`metrics_file`) written by this version, which records
-    the ``discrepancy`` it added (an older file's intervals are of the parameters alone): callers that keep
-    metrics across runs recompute the others."""
+    """Whether a result directory holds metrics (:func:`metrics_file`) of this :data:`METRICS_VERSION`; callers
+    that keep metrics across runs recompute the others (an older file's intervals may be the parameters'
+    alone)."""
     file = metrics_file(directory, test_pressure_kpa)
     if not file.exists():
         return False
     try:
-        return "discrepancy" in json.loads(file.read_text())
+        out = json.loads(file.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError):
         return False
+    return isinstance(out, dict) and out.get("version") == METRICS_VERSION
+
+
+def previous_draws(directory: str | Path, test_pressure_kpa: float | None = None, default: int = 100) -> int:
+    """The number of draws an existing metrics file of ``directory`` was made with (to recompute it alike), or
+    ``default`` without a readable one."""
+    try:
+        n = json.loads(metrics_file(directory, test_pressure_kpa).read_text()).get("n_draws", default)
+    except (OSError, ValueError, AttributeError):
+        return default
+    return n if isinstance(n, int) and n >= 2 else default
 
 
 def read_metrics(path: str | Path, test_pressure_kpa: float | None = None) -> dict:

@@ -275,12 +275,46 @@ def test_a_malformed_summary_beside_the_result_exits_2_naming_it(result_dir, tmp
 
 
 def test_metrics_written_before_the_discrepancy_existed_are_not_current(tmp_path):
-    from peano_bayes.metrics import metrics_current
+    from peano_bayes.metrics import METRICS_VERSION, metrics_current
 
     assert not metrics_current(tmp_path)  # none yet
     (tmp_path / "metrics.json").write_text(json.dumps({"material": "TP", "draws": {}}))
     assert not metrics_current(tmp_path)  # an older file: its intervals are the parameters' alone
-    (tmp_path / "metrics.json").write_text(json.dumps({"material": "TP", "draws": {}, "discrepancy": {}}))
-    assert metrics_current(tmp_path) and not metrics_current(tmp_path, 60.0)  # the common pressure's file is apart
+    for version, current in ((1, False), (METRICS_VERSION, True)):
+        (tmp_path / "metrics.json").write_text(json.dumps({"version": version, "material": "TP", "draws": {}}))
+        assert metrics_current(tmp_path) == current
+    assert not metrics_current(tmp_path, 60.0)  # the common pressure's file is apart
     (tmp_path / "metrics.json").write_text("{half")
     assert not metrics_current(tmp_path)
+
+
+def test_a_draw_whose_scale_is_undefined_takes_the_median_sd_of_the_others():
+    from peano_bayes.metrics import METRIC_UNITS, add_discrepancy
+
+    values = {name: np.full(5, 0.5) for name in METRIC_UNITS}
+    values["free_strain"] = np.array([0.1, 0.2, 0.3, 0.2, 0.2])
+    values["blocking_force_per_pressure"] = np.array([500.0, np.nan, 500.0, 0.0, 500.0])  # failed, degenerate
+    with np.errstate(all="raise"):  # no warning escapes
+        _, added, _ = add_discrepancy(values, {"load_cycle": 5.0}, 2e5, 0.05, np.random.default_rng(0))
+    test, sd = added["free_strain"]
+    finite = 5.0 * np.array([0.1, 0.3, 0.2]) / 100.0  # N x strain over the 100 N blocking force
+    assert test == "load_cycle"
+    np.testing.assert_allclose(sd, [finite[0], np.median(finite), finite[1], np.median(finite), finite[2]])
+
+
+@pytest.mark.slow
+def test_rank_recomputes_metrics_of_an_older_version_with_as_many_draws(result_dir, tmp_path, capsys):
+    import shutil
+
+    from peano_bayes.metrics import METRICS_VERSION
+
+    result = tmp_path / "TP"
+    result.mkdir()
+    shutil.copy(result_dir / "posterior.nc", result / "posterior.nc")
+    older = {"material": "TP", "n_draws": 3, "draws": {"free_strain": [0.1, 0.1, 0.1]}, "summary": {}}
+    (result / "metrics.json").write_text(json.dumps(older))
+    assert main(["rank", str(result), "--out", str(tmp_path / "ranking")]) == 0
+    capsys.readouterr()
+    written = json.loads((result / "metrics.json").read_text())
+    assert written["version"] == METRICS_VERSION and written["n_draws"] == 3
+    assert written["draws"]["free_strain"] != older["draws"]["free_strain"]
