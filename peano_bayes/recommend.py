@@ -514,9 +514,9 @@ def recommend(
     for code, tests in misfits.items():
         if tests:
             notes.append(
-                f"the model misfits {code}'s {', '.join(tests)} test beyond the sensor noise (residuals with "
-                "structure): its predictions and probabilities are the closest model's and do not include that "
-                "misfit"
+                f"the model misfits {code}'s {', '.join(tests)} test{'s' if len(tests) > 1 else ''} beyond the "
+                "sensor noise (residuals with structure): its predictions and probabilities are the closest "
+                "model's and do not include that misfit"
             )
     unconverged = [c for c, (idata, _) in materials.items() if not idata.posterior.attrs.get("converged", 1)]
     if unconverged:
