@@ -592,27 +592,26 @@ def _read_json(file: Path) -> dict:
     return out
 
 
+def _stored_metrics(directory: str | Path, test_pressure_kpa: float | None) -> dict:
+    """The metrics file of ``directory`` (:func:`metrics_file`) as a dict; empty when missing or unreadable."""
+    try:
+        out = json.loads(metrics_file(directory, test_pressure_kpa).read_text())
+    except (OSError, ValueError):  # ValueError: bad JSON or bytes that are not text
+        return {}
+    return out if isinstance(out, dict) else {}
+
+
 def metrics_current(directory: str | Path, test_pressure_kpa: float | None = None) -> bool:
     """Whether a result directory holds metrics (:func:`metrics_file`) of this :data:`METRICS_VERSION`; callers
     that keep metrics across runs recompute the others (an older file's intervals may be the parameters'
     alone)."""
-    file = metrics_file(directory, test_pressure_kpa)
-    if not file.exists():
-        return False
-    try:
-        out = json.loads(file.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError):
-        return False
-    return isinstance(out, dict) and out.get("version") == METRICS_VERSION
+    return _stored_metrics(directory, test_pressure_kpa).get("version") == METRICS_VERSION
 
 
 def previous_draws(directory: str | Path, test_pressure_kpa: float | None = None, default: int = 100) -> int:
     """The number of draws an existing metrics file of ``directory`` was made with (to recompute it alike), or
     ``default`` without a readable one."""
-    try:
-        n = json.loads(metrics_file(directory, test_pressure_kpa).read_text()).get("n_draws", default)
-    except (OSError, ValueError, AttributeError):
-        return default
+    n = _stored_metrics(directory, test_pressure_kpa).get("n_draws", default)
     return n if isinstance(n, int) and n >= 2 else default
 
 
