@@ -27,6 +27,8 @@ parameter-only interval. Failed (4 of 8 on the AR(1) likelihood).
 Pre-registered, version 2 (2026-11-28, before its first run; the idea was formed on seed 0's result): seed 1
 (data and sampler), otherwise as version 1; pass = every check inside the interval with discrepancy. Passed
 (8 of 8; 4 of 8 inside the parameter-only intervals).
+Pre-registered replication (2026-11-29, before its run): version 2's criterion on seed 2, the run that
+``independent_metrics.py``'s pre-registered check reads.
 
     python experiments/independent_data.py [--out DIR] [--seed N] [--draws N]
 
