@@ -1,8 +1,9 @@
 """Command line: ``peano-bayes <command>``. It parses, calls one documented function and prints.
 
 Exit status: 0 success; 1 a computation failed (for example the virtual rig's solver); 2 bad input (a one-line
-message naming what, where and what was expected; no traceback, nothing half-written); 3 a fit or run finished
-but did not converge (its results are written and marked unconverged); 130 interrupted (Ctrl-C).
+message naming what, where and what was expected, or a path given that cannot be read or written as asked;
+no traceback, nothing half-written); 3 a fit or run finished but did not converge (its results are written
+and marked unconverged); 130 interrupted (Ctrl-C).
 
 ``--json`` makes standard output carry only one JSON object; everything else (messages, progress) goes to
 standard error. ``--quiet`` keeps only warnings and errors; ``--verbose`` adds tracebacks of failed computations.
@@ -72,6 +73,15 @@ def _use_compilation_cache() -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """Run ``peano-bayes`` with ``argv`` (default: ``sys.argv[1:]``); return the exit status."""
+    try:
+        return _main(argv)
+    except BrokenPipeError:  # the reader of stdout went away (``peano-bayes check TP --json | head``): stop quietly
+        with contextlib.suppress(OSError):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_FAILED
+
+
+def _main(argv: list[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     command = COMMANDS[args.command]
@@ -87,6 +97,15 @@ def main(argv: list[str] | None = None) -> int:
             result = command.run(args)
     except PeanoBayesInputError as err:
         print(f"{say}: error: {err}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except BrokenPipeError:
+        raise
+    except OSError as err:  # a path given on the command line cannot be read or written as asked
+        if args.verbose:
+            traceback.print_exc()
+        where = f"{err.filename}: " if err.filename is not None else ""
+        expected = "a folder or a new path" if isinstance(err, (FileExistsError, NotADirectoryError)) else "a path"
+        print(f"{say}: error: {where}{err.strerror or err}; expected {expected} it can read or write", file=sys.stderr)
         return EXIT_BAD_INPUT
     except PeanoBayesError as err:  # not the user's input: a failure of the computation
         if args.verbose:

@@ -27,6 +27,7 @@ from .defaults import (
     DEFAULT_STARTS,
     DEFAULT_TESTS,
     DEFAULT_WARMUP,
+    MAX_PRESSURE_KPA,
 )
 from .errors import PeanoBayesInputError
 
@@ -67,6 +68,8 @@ _DATA_HELP = (
 def demo(args):
     from .demo import blocking_and_free_strain
 
+    for value in args.pressures_kpa:
+        _pressure_kpa(value, "--pressures-kpa")
     rows = blocking_and_free_strain(args.pressures_kpa)
     print("Default four-tube Peano muscle (w = 15 mm, l = 49.5 mm), nominal parameters")
     print(f"{'pressure [kPa]':>15} {'blocking force [N]':>19} {'free strain [%]':>16}")
@@ -153,6 +156,8 @@ def simulate(args):
     for path in (csv_path, toml_path):
         if path.is_dir():
             raise PeanoBayesInputError(f"--out: {path} is a directory; expected a file path like DIR/FC.csv")
+        if path.exists() and not args.force:
+            raise PeanoBayesInputError(f"--out: {path} exists; choose another path or pass --force to replace it")
     options = {} if config is None else {"config": config}
     dataset = simulate_dataset(
         args.material,
@@ -208,6 +213,7 @@ def _simulate_arguments(p):
     p.add_argument("--drift", action="store_true", help="add a slow linear drift to the force sensor")
     p.add_argument("--specimens", type=int, default=2, help="specimens per material (default: 2, as in the paper)")
     p.add_argument("--repeats", type=int, default=3, help="repeats of each test (default: 3, as in the paper)")
+    p.add_argument("--force", action="store_true", help="replace an existing dataset at --out")
 
 
 simulate.arguments = _simulate_arguments
@@ -371,7 +377,7 @@ fit_command.arguments = _fit_arguments
 def run(args):
     options = _check_sampling(args)
     fanout = _fanout_options(args)
-    materials = tuple(args.materials)
+    materials = tuple(m.upper() for m in args.materials)
     unknown = [m for m in materials if m not in bundled.MATERIALS]
     if unknown:
         raise PeanoBayesInputError(f"unknown material(s) {', '.join(unknown)}; bundled: {' '.join(bundled.MATERIALS)}")
@@ -456,30 +462,38 @@ fit_many_command.arguments = _fit_many_arguments
 
 @command("prior", "priors: 'prior new --like CODE --out FILE.toml' writes a starting prior to edit")
 def prior_command(args):
-    from .atomic import write_text
+    from .atomic import replacing, write_into
     from .inference.priors import load_prior, starting_prior
 
     out = Path(args.out)
     if out.suffix != ".toml":
         raise PeanoBayesInputError(f"--out {out}: expected a path ending in .toml")
-    if out.exists() and not args.force:
+    if out.is_dir() or (out.exists() and not args.force):
         raise PeanoBayesInputError(f"--out {out}: the file exists; choose another path or pass --force")
     if not out.parent.is_dir():
         raise PeanoBayesInputError(f"--out {out}: the folder {out.parent} does not exist")
+    if args.material is not None and not args.material.strip():
+        raise PeanoBayesInputError("--material: expected a material code, got an empty string")
     material = args.material or out.stem
-    text = starting_prior(args.like, material=material)
-    write_text(out, text)
-    prior = load_prior(out)  # the written file loads as it will in a fit
+    text = starting_prior(args.like, material=material, folder=out.parent)
+    with replacing(out) as tmp:  # the file loads as it will in a fit before it replaces anything
+        write_into(tmp, text.encode("utf-8"))
+        prior = load_prior(tmp)
     print(
         f"wrote {out}: the prior of {args.like} ({len(prior.names)} parameters) for material {material}; edit it, "
-        f"then: peano-bayes fit DATA.csv --prior {out}"
+        f"then: peano-bayes fit DATA.csv --prior {out} --out results"
     )
     return {"prior": str(out), "like": args.like, "material": material, "parameters": list(prior.names)}
 
 
 def _prior_arguments(p):
     p.add_argument("action", choices=("new",), help="new: write a starting prior that extends a bundled one")
-    p.add_argument("--like", required=True, metavar="CODE", help=f"start from: {' '.join(bundled.MATERIALS)}")
+    p.add_argument(
+        "--like",
+        required=True,
+        metavar="CODE|FILE.toml",
+        help=f"start from a bundled material's prior ({' '.join(bundled.MATERIALS)}) or a prior file",
+    )
     p.add_argument("--out", required=True, metavar="FILE.toml", help="the prior file to write")
     p.add_argument("--material", default=None, metavar="CODE", help="meta.material (default: the file's stem)")
     p.add_argument("--force", action="store_true", help="overwrite an existing file")
@@ -502,6 +516,8 @@ def metrics_command(args):
         test_pressure_kpa=_pressure_kpa(args.pressure_kpa),
     )
     print(f"{out['material']}: {out['n_draws']} posterior draws ({out['n_failed']} failed to simulate)")
+    if out["n_failed"]:
+        print(f"peano-bayes metrics: WARNING: {_failed_draws(out['n_failed'], out['n_draws'])}", file=sys.stderr)
     print(metrics_markdown(out["material"], out["summary"], out["published"]))
     if out["prior_only"]:
         print(f"not informed by the fitted tests, drawn from the prior: {', '.join(out['prior_only'])}")
@@ -513,6 +529,13 @@ def metrics_command(args):
             "and the test pressure only"
         )
     return {k: v for k, v in out.items() if k != "draws"}
+
+
+def _failed_draws(n_failed: int, n_drawn: int) -> str:
+    return (
+        f"{n_failed} of {n_drawn} posterior draws could not be simulated; the metrics rest on the other "
+        f"{n_drawn - n_failed}, the parameters the model simulates most easily, not a random subset"
+    )
 
 
 def _metrics_arguments(p):
@@ -534,9 +557,12 @@ _PRESSURE_HELP = (
 )
 
 
-def _pressure_kpa(value: float | None) -> float | None:
-    if value is not None and not (math.isfinite(value) and value > 0):
-        raise PeanoBayesInputError(f"--pressure-kpa must be a positive number of kPa, got {value}")
+def _pressure_kpa(value: float | None, option: str = "--pressure-kpa") -> float | None:
+    if value is not None and not (math.isfinite(value) and 0 < value <= MAX_PRESSURE_KPA):
+        raise PeanoBayesInputError(
+            f"{option} must be a pressure in kPa above 0 and at most {MAX_PRESSURE_KPA:g} (the model's range), "
+            f"got {value:g}"
+        )
     return value
 
 
@@ -566,7 +592,13 @@ def rank_command(args):
     pressures = {m["material"]: m.get("test_pressure_kpa") for m in metrics}
     own = {m["material"]: m.get("own_test_pressure_kpa", m.get("test_pressure_kpa")) for m in metrics}
     draws = {m["material"]: m["draws"] for m in metrics}
-    report = rank_materials(draws, from_prior=prior_only, test_pressure_kpa=pressures, own_test_pressure_kpa=own)
+    failed = {m["material"]: (m.get("n_failed", 0), m.get("n_draws", len(m["draws"]))) for m in metrics}
+    for code, (n_failed, n_drawn) in failed.items():
+        if n_failed:
+            print(f"peano-bayes rank: WARNING: {code}: {_failed_draws(n_failed, n_drawn)}", file=sys.stderr)
+    report = rank_materials(
+        draws, from_prior=prior_only, test_pressure_kpa=pressures, own_test_pressure_kpa=own, failed_draws=failed
+    )
     out = Path(args.out) if args.out else Path(args.results[0]).resolve().parent
     out.mkdir(parents=True, exist_ok=True)
     text = ranking_markdown(report)
@@ -642,7 +674,10 @@ def discover_command(args):
     from .discovery import DEFAULT_BASE, Gates, discover, discovery_data, write_report
     from .discovery.effects import check_effects
 
-    base = check_effects(args.base.split(",")) if args.base else DEFAULT_BASE
+    named = None if args.base is None else [name.strip() for name in args.base.split(",") if name.strip()]
+    if named == []:
+        raise PeanoBayesInputError(f"--base: expected comma-separated effect names, got {args.base!r}")
+    base = check_effects(named) if named is not None else DEFAULT_BASE
     if args.max_effects < 1:
         raise PeanoBayesInputError(f"--max-effects must be >= 1, got {args.max_effects}")
     dataset = load(bundled.resolve_dataset(args.data))  # validate before anything is written

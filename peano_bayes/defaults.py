@@ -37,6 +37,11 @@ DEFAULT_COORDINATES = "tensile_stretch"
 COORDINATE_KINDS = ("tensile_stretch", "theta")
 #: Probability mass of the reported highest-density intervals (arviz's default).
 HDI_PROB = 0.94
+#: Highest pressure [kPa] the forward model is asked to predict at (requirements, ``--pressure-kpa``, the demo):
+#: five times the paper's highest test pressure (200 kPa), far past the data any bundled prior rests on.
+MAX_PRESSURE_KPA = 1000.0
+#: Highest series compliance [m/N] of a mount (the data format's ``added_compliance_mm_per_n`` limit, 100 mm/N).
+MAX_MOUNT_COMPLIANCE_M_PER_N = 0.1
 
 
 def compilation_cache_dir() -> Path:

@@ -42,7 +42,7 @@ import numpy as np
 from scipy.signal import savgol_filter
 
 from . import bundled
-from .errors import PeanoBayesInputError
+from .errors import PeanoBayesError, PeanoBayesInputError
 from .formatting import format_number
 from .inference.fit import structured_tests
 from .inference.posterior import STEP_ONLY_PARAMETERS
@@ -547,6 +547,12 @@ def evaluate_result(
     result = posterior_metrics(
         idata, n_draws=n_draws, seed=seed, progress=bar, test_pressure_pa=pressure_pa, discrepancy=discrepancy
     )
+    if result.n_failed >= n_draws:  # nothing to summarize: say so rather than write a file of NaN
+        where = f" at {common:g} kPa" if common is not None else ""
+        raise PeanoBayesError(
+            f"{material}: none of the {n_draws} posterior draws could be simulated{where} (the physics did not "
+            "converge); nothing written"
+        )
     summary = result.summary(hdi_prob)
     out = {
         "version": METRICS_VERSION,

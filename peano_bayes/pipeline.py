@@ -996,6 +996,19 @@ def run_bundled(
     return ordered
 
 
+def _check_inputs(dataset: Dataset, kwargs: dict) -> None:
+    """Raise :class:`PeanoBayesInputError` where :func:`infer` with ``kwargs`` would refuse ``dataset``'s
+    tests, prior or walker count (with the configured model; a model that discovery enlarges is checked again
+    by :func:`infer`)."""
+    selected = select_tests(dataset, kwargs.get("tests", DEFAULT_TESTS))
+    whole_prior = prior_of(selected, kwargs.get("prior"))
+    if kwargs.get("n_walkers") is not None:
+        held = () if kwargs.get("sample_all") else DEFAULT_HELD
+        config = whole_prior.config
+        posterior = build_posterior(prepare(selected), whole_prior.for_config(config), config=config, held=held)
+        walker_count(kwargs["n_walkers"], posterior.ndim)
+
+
 def fit_many(
     data_paths, out_dir: str | Path, *, jobs: int = 1, scheduler: str | None = None, log=print, **kwargs
 ) -> list[dict]:
@@ -1013,8 +1026,8 @@ def fit_many(
         raise PeanoBayesInputError(
             f"data files must have distinct names (each names its result folder); repeated: {', '.join(repeated)}"
         )
-    for path in paths:
-        load(path)  # a bad file is refused before anything runs
+    for path in paths:  # a bad file, prior, test choice or walker count is refused before anything is written
+        _check_inputs(load(path), kwargs)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     log = RunLog(out_dir / "run.log", log)

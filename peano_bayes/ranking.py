@@ -203,7 +203,11 @@ def ordering_checks(draws: dict) -> list[dict]:
 
 
 def rank_materials(
-    draws: dict, from_prior=(), test_pressure_kpa: dict | None = None, own_test_pressure_kpa: dict | None = None
+    draws: dict,
+    from_prior=(),
+    test_pressure_kpa: dict | None = None,
+    own_test_pressure_kpa: dict | None = None,
+    failed_draws: dict | None = None,
 ) -> dict:
     """Everything :mod:`peano_bayes.ranking` computes, as plain data: ``materials``; ``criteria`` (per
     criterion: ``p_best``, ``mean_rank``, ``rank_interval`` by material, ``p_better`` matrix rows by material,
@@ -215,7 +219,9 @@ def rank_materials(
     ``test_pressure_kpa``: code -> the pressure each material's metrics were simulated at (each at its own test
     pressure, or all at a common one); kept in the report so that :func:`ranking_markdown` can say when they
     differ. ``own_test_pressure_kpa``: code -> the pressure each material was tested at, where the metrics were
-    simulated at a common pressure instead."""
+    simulated at a common pressure instead. ``failed_draws``: code -> ``(failed, drawn)``, the posterior draws
+    whose metrics could not be simulated; kept so that :func:`ranking_markdown` says whose metrics rest on
+    fewer draws (those the model can simulate there, not a random subset)."""
     materials = tuple(draws)
     from_prior = set(from_prior)
     criteria = {}
@@ -264,6 +270,7 @@ def rank_materials(
         "left_out": left_out,
         "test_pressure_kpa": dict(test_pressure_kpa or {}),
         "own_test_pressure_kpa": dict(own_test_pressure_kpa or test_pressure_kpa or {}),
+        "failed_draws": {c: [int(f), int(n)] for c, (f, n) in (failed_draws or {}).items() if f},
     }
 
 
@@ -300,6 +307,14 @@ def ranking_markdown(report: dict) -> str:
             f"*Test pressures differ* ({listed}). Each material is compared at its own test pressure: a per-MPa "
             "criterion is its value there divided by that pressure, and comparing those across pressures assumes "
             "the per-MPa value does not change with pressure (the paper's Table 3 makes the same assumption).",
+            "",
+        ]
+    failed = report.get("failed_draws", {})
+    if failed:
+        listed = "; ".join(f"{c}: {f} of {n}" for c, (f, n) in failed.items())
+        lines += [
+            f"*Draws that could not be simulated* ({listed}): those materials' metrics rest on the draws the model "
+            "could simulate here, which leans them towards the parameters it simulates most easily.",
             "",
         ]
     lines.append("| criterion | " + " | ".join(materials) + " |")

@@ -47,6 +47,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import bundled
+from .defaults import MAX_MOUNT_COMPLIANCE_M_PER_N, MAX_PRESSURE_KPA
 from .errors import PeanoBayesInputError, did_you_mean
 from .inference.likelihood import SPECIMEN_SCALED
 from .inference.posterior import SPECIMEN_SD
@@ -166,9 +167,9 @@ def load_spec(path: str | Path) -> Spec:
             f"{float(IDEAL_FREE_STRAIN):.3f} (ideal tubes at zero load, 1 - 2/pi)"
         )
     pressure = _number(req["max_pressure_kpa"], at("max_pressure_kpa"))
-    if pressure > 1000.0:
+    if pressure > MAX_PRESSURE_KPA:
         raise PeanoBayesInputError(
-            f"{at('max_pressure_kpa')}: expected at most 1000 kPa (the model's range), got {pressure:g}"
+            f"{at('max_pressure_kpa')}: expected at most {MAX_PRESSURE_KPA:g} kPa (the model's range), got {pressure:g}"
         )
     hysteresis = req.get("max_hysteresis")
     if hysteresis is not None and not 0.0 < _number(hysteresis, at("max_hysteresis")) <= 1.0:
@@ -480,9 +481,11 @@ def recommend(
     ``candidates`` (best first, see :func:`evaluate_candidates`), ``explanation`` of the top one, ``removed``
     (the rig artefacts left out of the design's predictions) and ``notes``. ``mount_compliance_m_per_n``
     [m/N]: the design's mount (default 0: stiff). ``seed``: of the new-specimen factors."""
-    if not (math.isfinite(mount_compliance_m_per_n) and mount_compliance_m_per_n >= 0.0):
+    compliance = mount_compliance_m_per_n
+    if not (math.isfinite(compliance) and 0.0 <= compliance <= MAX_MOUNT_COMPLIANCE_M_PER_N):
         raise PeanoBayesInputError(
-            f"mount compliance: expected a finite number >= 0 [m/N], got {mount_compliance_m_per_n!r}"
+            f"mount compliance: expected a number of m/N from 0 to {MAX_MOUNT_COMPLIANCE_M_PER_N:g} (100 mm/N), "
+            f"got {mount_compliance_m_per_n!r}"
         )
     from .inference.results import load_result
     from .metrics import read_metrics, result_discrepancy

@@ -16,6 +16,7 @@ from peano_bayes.commands import COMMANDS
 from peano_bayes.data import load, save
 from peano_bayes.errors import PeanoBayesInputError
 from peano_bayes.inference.priors import load_prior
+from peano_bayes.ranking import CRITERIA
 from peano_bayes.rig import RigSimulationError
 
 
@@ -143,3 +144,87 @@ def test_every_command_is_registered_once_with_help():
         COMMANDS
     )
     assert all(c.help for c in COMMANDS.values())
+
+
+def test_prior_new_like_a_prior_file_of_ones_own_extends_it_by_its_relative_path(tmp_path, capsys):
+    (tmp_path / "p").mkdir()
+    (tmp_path / "sim").mkdir()
+    first = tmp_path / "p" / "mine.toml"
+    assert main(["prior", "new", "--like", "TPC", "--out", str(first)]) == 0
+    second = tmp_path / "sim" / "next.toml"
+    assert main(["prior", "new", "--like", str(first), "--out", str(second)]) == 0
+    assert 'extends = "../p/mine.toml"' in second.read_text()
+    chain = load_prior(second).files
+    assert chain[-1] == second and chain[-2].resolve() == first.resolve()
+    capsys.readouterr()
+    assert main(["prior", "new", "--like", "TPC", "--out", str(tmp_path / "x.toml"), "--material", " "]) == 2
+    assert "--material" in capsys.readouterr().err and not (tmp_path / "x.toml").exists()
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["check", "."], "a directory, not a dataset"),
+        (["check", "{tmp}/notes.txt"], "not a dataset file"),
+        (["demo", "--pressures-kpa", "-5"], "--pressures-kpa must be a pressure in kPa"),
+        (["demo", "--pressures-kpa", "nan"], "--pressures-kpa must be a pressure in kPa"),
+        (["metrics", "{tmp}", "--pressure-kpa", "200000"], "at most 1000"),
+        (["discover", "TP", "--out", "{tmp}/d", "--base", ""], "--base: expected comma-separated effect names"),
+        (["recommend", "--spec", "{tmp}/spec.toml", "--mount-compliance", "5"], "from 0 to 0.1"),
+    ],
+)
+def test_bad_arguments_exit_2_with_one_line_naming_them(tmp_path, capsys, argv, message):
+    (tmp_path / "notes.txt").write_text("not a dataset")
+    before = sorted(tmp_path.rglob("*"))
+    assert main([a.format(tmp=tmp_path) for a in argv]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1 and "Traceback" not in err
+    assert sorted(tmp_path.rglob("*")) == before  # nothing written
+
+
+def test_a_path_that_cannot_be_written_as_asked_is_bad_input_without_a_traceback(tmp_path, capsys):
+    for code in ("TP", "P"):
+        (tmp_path / code).mkdir()
+        draws = {c: [1.0, 2.0, 3.0] for c in CRITERIA}
+        (tmp_path / code / "metrics.json").write_text(json.dumps({"material": code, "draws": draws}))
+    taken = tmp_path / "taken"
+    taken.write_text("a file, not a folder")
+    assert main(["rank", str(tmp_path / "TP"), str(tmp_path / "P"), "--out", str(taken)]) == 2
+    err = capsys.readouterr().err
+    assert str(taken) in err and err.count("\n") == 1 and "Traceback" not in err
+    assert taken.read_text() == "a file, not a folder"
+
+
+def test_material_codes_are_case_blind_on_the_command_line(capsys):
+    assert main(["check", "tp", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["file"] == str(bundled.dataset_path("TP"))
+
+
+def test_a_reader_that_closes_the_pipe_ends_the_command_quietly(monkeypatch, capsys):
+    class ClosedPipe:
+        def write(self, text):
+            raise BrokenPipeError(32, "Broken pipe")
+
+        def flush(self):
+            raise BrokenPipeError(32, "Broken pipe")
+
+        def fileno(self):
+            raise OSError("no file descriptor")
+
+    monkeypatch.setattr(sys, "stdout", ClosedPipe())
+    assert main(["check", "TP", "--json"]) == 1
+    assert "Traceback" not in capsys.readouterr().err
+
+
+def test_fit_many_refuses_a_bad_prior_or_walker_count_before_writing(own_muscle, tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(
+        '[meta]\nmaterial = "VM"\nextends = "default.toml"\n[parameters.length_fraction]\n'
+        'distribution = "truncnormal"\nmean = 0.7\nsd = -1.0\nlow = 0.3\nhigh = 1.0\nunit = "-"\n'
+        'provenance = "a test"\n'
+    )
+    out = tmp_path / "many"
+    assert main(["fit-many", str(own_muscle), "--prior", str(bad), "--out", str(out)]) == 2
+    assert "'sd' must be positive" in capsys.readouterr().err and not out.exists()
+    assert main(["fit-many", str(own_muscle), "--prior", "TPC", "--walkers", "4", "--out", str(out)]) == 2
+    assert "walkers" in capsys.readouterr().err and not out.exists()

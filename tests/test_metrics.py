@@ -153,7 +153,22 @@ def test_metrics_at_a_common_pressure_go_to_their_own_file_and_follow_the_pressu
     assert own["test_pressure_kpa"] == own["own_test_pressure_kpa"] == 30.0 and own["published"]
     assert np.all(np.asarray(at_60["draws"]["free_strain"]) > np.asarray(own["draws"]["free_strain"]))
     assert main(["metrics", str(result_dir), "--pressure-kpa", "-5", "--no-progress"]) == 2
-    assert "--pressure-kpa must be a positive number of kPa, got -5" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "--pressure-kpa must be a pressure in kPa above 0 and at most 1000" in err and "got -5" in err
+
+
+def test_metrics_of_which_no_draw_could_be_simulated_are_not_written(result_dir, tmp_path, monkeypatch, capsys):
+    import shutil
+    from types import SimpleNamespace
+
+    from peano_bayes import metrics
+
+    shutil.copy(result_dir / "posterior.nc", tmp_path / "posterior.nc")
+    monkeypatch.setattr(metrics, "posterior_metrics", lambda idata, n_draws, **kw: SimpleNamespace(n_failed=n_draws))
+    assert main(["metrics", str(tmp_path), "--draws", "3", "--no-progress", "--pressure-kpa", "900"]) == 1
+    err = capsys.readouterr().err
+    assert "TP: none of the 3 posterior draws could be simulated at 900 kPa" in err and "Traceback" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["posterior.nc"]
 
 
 # --- model discrepancy: a misfit test's excess widens what is read off it -----------------------------------

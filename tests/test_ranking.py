@@ -161,3 +161,17 @@ def test_ordering_summary_counts_each_verdict_once(rng):
     assert f"leave {expected['undecided']} undecided" in line
     assert f"{expected['not informed']} more rest on the prior only" in line
     assert line in ranking_markdown(report)
+
+
+def test_rank_says_whose_metrics_rest_on_fewer_draws_than_were_drawn(tmp_path, rng, capsys):
+    for code, failed in {"TP": 68, "P": 0}.items():
+        (tmp_path / code).mkdir()
+        draws = {c: rng.normal(1.0, 0.1, 100 - failed).tolist() for c in CRITERIA}
+        m = {"material": code, "n_draws": 100, "n_failed": failed, "draws": draws}
+        (tmp_path / code / "metrics.json").write_text(json.dumps(m))
+    assert main(["rank", str(tmp_path / "TP"), str(tmp_path / "P")]) == 0
+    err = capsys.readouterr().err
+    assert "WARNING: TP: 68 of 100 posterior draws could not be simulated" in err and " P: " not in err
+    page = (tmp_path / "ranking.md").read_text()
+    assert "*Draws that could not be simulated* (TP: 68 of 100)" in page
+    assert json.loads((tmp_path / "ranking.json").read_text())["failed_draws"] == {"TP": [68, 100]}

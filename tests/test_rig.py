@@ -233,17 +233,23 @@ def test_cli_simulate_writes_a_dataset(tmp_path, capsys, reduced):
         (["--quirk", "series_complience"], "", "did you mean 'series_compliance'"),
         (["--material", "FCC"], "", "unknown material code 'FCC'"),
         ([], "[parameters]\ntensile_k = 1e4\n", "unknown parameter 'tensile_k'"),
+        ([], "", "exists"),
     ],
 )
 def test_cli_simulate_bad_input(tmp_path, capsys, extra, params_text, message):
     params = tmp_path / "params.toml"
     params.write_text(params_text)
     out = tmp_path / "out" / "FC.csv"
+    if message == "exists":  # an existing dataset is not replaced without --force
+        out.parent.mkdir()
+        out.with_suffix(".toml").write_text("kept")
     argv = ["simulate", "--material", "FC", "--params", str(params), "--out", str(out), *extra]
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and message in err and err.startswith("peano-bayes simulate: error:")
-    assert not out.exists() and not out.with_suffix(".toml").exists()
+    assert not out.exists() and out.with_suffix(".toml").exists() == (message == "exists")
+    if message == "exists":
+        assert out.with_suffix(".toml").read_text() == "kept"
 
 
 # --- the same protocol on Veale's force-balance model ----------------------------------------------------------

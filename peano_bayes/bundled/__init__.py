@@ -46,6 +46,7 @@ def resolve_dataset(name: str | Path) -> Path:
     """``name`` as given if it names an existing file (or CSV stem), else the bundled dataset of that material
     code; so the command line takes ``TP`` as well as ``path/to/TP.csv``."""
     path = Path(name)
-    if path.exists() or path.with_suffix(".csv").exists() or str(name) not in MATERIALS:
+    code = str(name).upper()  # material codes are case-blind, as ``prior new --like`` and ``run --materials``
+    if path.exists() or path.with_name(path.name + ".csv").exists() or code not in MATERIALS:
         return path
-    return dataset_path(str(name))
+    return dataset_path(code)

@@ -51,6 +51,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import tomllib
 from collections.abc import Mapping
 from pathlib import Path
@@ -680,27 +681,31 @@ def _loc_scale(path, name: str, entry: Mapping, dist: str) -> tuple[float, float
     return 0.0, 1.0
 
 
-def starting_prior(like: str, *, material: str = "MY") -> str:
-    """The text of a prior file to edit for a muscle of one's own: it ``extends`` the bundled prior file of
-    material ``like`` (so it keeps that material's ``[config]``) and writes out every parameter entry of that
-    material's merged prior, each with its unit and provenance, so the user sees the whole prior and edits in
-    place. ``material`` [str] is the code written into ``meta.material``. Loads like any prior file once saved
-    (``extends`` is resolved among the bundled priors)."""
+def starting_prior(like: str, *, material: str = "MY", folder: str | os.PathLike = ".") -> str:
+    """The text of a prior file to edit for a muscle of one's own: it ``extends`` the prior of ``like`` (a
+    bundled material code, or a prior file) so it keeps that prior's ``[config]``, and writes out every parameter
+    entry of the merged prior, each with its unit and provenance, so the user sees the whole prior and edits in
+    place. ``material`` [str] is the code written into ``meta.material``; ``folder``, the folder the text will be
+    saved in: a bundled prior is extended by its name (resolved among the bundled priors), a file of one's own
+    by its path relative to ``folder``."""
     import tomli_w
 
     prior = load_prior(like)
     start = prior.files[-1]
+    bundled = start.resolve().parent == DEFAULT_PRIORS_DIR.resolve()
+    extends = start.name if bundled else os.path.relpath(start.resolve(), Path(folder).resolve())
+    source = f"the bundled prior of {like}" if bundled else f"the prior file {start}"
     header = (
-        f"# Prior for material {material}, started from the bundled prior of {like} ({start.name}).\n"
+        f"# Prior for material {material}, started from {source} ({start.name}).\n"
         "# Edit the entries your material calls for (distribution, its fields, low/high, provenance); delete an\n"
         f"# entry to take {like}'s. Format: docs/inference.md#prior-files. Fit with\n"
-        f"#   peano-bayes fit DATA.csv --prior THIS_FILE.toml\n\n"
+        f"#   peano-bayes fit DATA.csv --prior THIS_FILE.toml --out results\n\n"
     )
     document = {
         "meta": {
             "material": material,
-            "extends": start.name,
-            "description": f"starting prior for {material}, from the bundled prior of {like}",
+            "extends": Path(extends).as_posix(),
+            "description": f"starting prior for {material}, from {source}",
         },
         "parameters": {name: dict(prior.marginals[name].spec) for name in prior.names},
     }
