@@ -227,7 +227,8 @@ def _sampling_arguments(p):
         default=list(DEFAULT_TESTS),
         choices=ALL_TESTS,
         metavar="TEST",
-        help=f"tests to fit (default: {' '.join(DEFAULT_TESTS)}; the step response costs several times more)",
+        help=f"tests to fit, some of {' '.join(ALL_TESTS)} (default: {' '.join(DEFAULT_TESTS)}; the step response "
+        "costs several times more)",
     )
     p.add_argument(
         "--starts", type=int, default=DEFAULT_STARTS, help=f"least-squares starts (default: {DEFAULT_STARTS})"

@@ -212,6 +212,15 @@ def _parse_csv(text: str, name: str) -> tuple[Run, ...]:
 def _check_header(names: list[str], name: str) -> list[Column]:
     if not any(names):
         raise DataFormatError("empty header line", file=name, row=1, value="", expected=_HEADER_HINT)
+    separator = next((sep for sep in (";", "\t", "|") if len(names) == 1 and sep in names[0]), None)
+    if separator is not None:
+        raise DataFormatError(
+            f"the header is one field: the columns look separated by {separator!r}",
+            file=name,
+            row=1,
+            value=names[0],
+            expected="comma-separated columns (save the sheet as CSV with ',' between fields and '.' as decimal point)",
+        )
     seen: set[str] = set()
     for position, col in enumerate(names, start=1):
         if not col:
