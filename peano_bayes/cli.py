@@ -5,10 +5,11 @@ message naming what, where and what was expected, or a path given that cannot be
 no traceback, nothing half-written); 3 a fit or run finished but did not converge (its results are written
 and marked unconverged); 130 interrupted (Ctrl-C).
 
-``--json`` makes standard output carry only one JSON object; everything else (messages, progress) goes to
-standard error. ``--quiet`` keeps only warnings and errors; ``--verbose`` adds tracebacks of failed computations.
-``--help`` and ``--version`` do not import JAX. The compiled programs are cached on disk
-(``$PEANO_BAYES_CACHE``, default ``~/.cache/peano_bayes/jax``), so a second run skips most compilation.
+``--json`` makes standard output carry only one JSON object (standard JSON: a value that is not finite is
+``null``); everything else (messages, progress) goes to standard error. ``--quiet`` keeps only warnings and
+errors; ``--verbose`` adds tracebacks of failed computations. ``--help`` and ``--version`` do not import JAX.
+The compiled programs are cached on disk (``$PEANO_BAYES_CACHE``, default ``~/.cache/peano_bayes/jax``), so a
+second run skips most compilation.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import math
 import os
 import sys
 import traceback
@@ -71,6 +73,23 @@ def _use_compilation_cache() -> None:
         os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "1")
 
 
+def _strict_json(value):
+    """``value`` with every non-finite float (NaN: a metric no draw defines) as ``None``, so ``--json`` prints
+    standard JSON (``null``), which any reader accepts, rather than Python's ``NaN``."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _strict_json(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_strict_json(v) for v in value]
+    return value
+
+
+def _json_number(value):
+    """A number type JSON does not know (a NumPy scalar) as a float, or ``None`` where it is not finite."""
+    return _strict_json(float(value))
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run ``peano-bayes`` with ``argv`` (default: ``sys.argv[1:]``); return the exit status."""
     try:
@@ -120,7 +139,7 @@ def _main(argv: list[str] | None) -> int:
             human.close()
     result = {} if result is None else result
     if args.json:
-        print(json.dumps(result, default=float))
+        print(json.dumps(_strict_json(result), default=_json_number, allow_nan=False))
     if result.get("converged") is False:
         print(f"{say}: WARNING: not converged (exit status {EXIT_UNCONVERGED})", file=sys.stderr)
         return EXIT_UNCONVERGED

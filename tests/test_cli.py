@@ -228,3 +228,19 @@ def test_fit_many_refuses_a_bad_prior_or_walker_count_before_writing(own_muscle,
     assert "'sd' must be positive" in capsys.readouterr().err and not out.exists()
     assert main(["fit-many", str(own_muscle), "--prior", "TPC", "--walkers", "4", "--out", str(out)]) == 2
     assert "walkers" in capsys.readouterr().err and not out.exists()
+
+
+def test_json_output_is_standard_json_with_null_where_a_value_is_not_finite(monkeypatch, capsys):
+    import numpy as np
+
+    from peano_bayes.commands import Command
+
+    result = {"nan": float("nan"), "many": [np.float64("inf"), 1.5], "narrow": np.float32(2.5), "n": 3}
+    monkeypatch.setitem(COMMANDS, "demo", Command("a stand-in", lambda args: result))
+    assert main(["demo", "--json"]) == 0
+
+    def refuse(constant):
+        raise ValueError(f"not standard JSON: {constant}")
+
+    parsed = json.loads(capsys.readouterr().out, parse_constant=refuse)
+    assert parsed == {"nan": None, "many": [None, 1.5], "narrow": 2.5, "n": 3}
