@@ -94,9 +94,11 @@ def main(argv: list[str] | None = None) -> int:
     """Run ``peano-bayes`` with ``argv`` (default: ``sys.argv[1:]``); return the exit status."""
     try:
         return _main(argv)
-    except BrokenPipeError:  # the reader of stdout went away (``peano-bayes check TP --json | head``): stop quietly
+    except BrokenPipeError:  # the reader went away (``peano-bayes check TP --json | head``): stop without a traceback
         with contextlib.suppress(OSError):
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        with contextlib.suppress(OSError):
+            print("peano-bayes: stopped: the pipe it wrote to was closed", file=sys.stderr)
         return EXIT_FAILED
 
 
@@ -119,12 +121,15 @@ def _main(argv: list[str] | None) -> int:
         return EXIT_BAD_INPUT
     except BrokenPipeError:
         raise
-    except OSError as err:  # a path given on the command line cannot be read or written as asked
+    except OSError as err:  # a file or folder cannot be read or written as asked (a path the user gave)
         if args.verbose:
             traceback.print_exc()
-        where = f"{err.filename}: " if err.filename is not None else ""
+        if err.filename is None:  # not a path (a lost connection, too many open files): the work failed
+            print(f"{say}: failed: {err}", file=sys.stderr)
+            return EXIT_FAILED
         expected = "a folder or a new path" if isinstance(err, (FileExistsError, NotADirectoryError)) else "a path"
-        print(f"{say}: error: {where}{err.strerror or err}; expected {expected} it can read or write", file=sys.stderr)
+        message = f"{err.filename}: {err.strerror or err}; expected {expected} it can read or write"
+        print(f"{say}: error: {message}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except PeanoBayesError as err:  # not the user's input: a failure of the computation
         if args.verbose:

@@ -152,7 +152,10 @@ def simulate(args):
     from .rig import read_parameter_file, simulate_dataset
 
     params, config = read_parameter_file(args.params) if args.params else ({}, None)
-    csv_path, toml_path = dataset_paths(args.out)
+    try:
+        csv_path, toml_path = dataset_paths(args.out)
+    except PeanoBayesInputError as err:
+        raise PeanoBayesInputError(f"--out: {err}") from None
     for path in (csv_path, toml_path):
         if path.is_dir():
             raise PeanoBayesInputError(f"--out: {path} is a directory; expected a file path like DIR/FC.csv")
@@ -469,14 +472,16 @@ def prior_command(args):
     out = Path(args.out)
     if out.suffix != ".toml":
         raise PeanoBayesInputError(f"--out {out}: expected a path ending in .toml")
-    if out.is_dir() or (out.exists() and not args.force):
+    if out.is_dir():
+        raise PeanoBayesInputError(f"--out {out}: a folder; expected the path of a prior file to write")
+    if out.exists() and not args.force:
         raise PeanoBayesInputError(f"--out {out}: the file exists; choose another path or pass --force")
     if not out.parent.is_dir():
         raise PeanoBayesInputError(f"--out {out}: the folder {out.parent} does not exist")
     if args.material is not None and not args.material.strip():
         raise PeanoBayesInputError("--material: expected a material code, got an empty string")
     material = args.material or out.stem
-    text = starting_prior(args.like, material=material, folder=out.parent)
+    text = starting_prior(args.like, material=material, out=out)
     with replacing(out) as tmp:  # the file loads as it will in a fit before it replaces anything
         write_into(tmp, text.encode("utf-8"))
         prior = load_prior(tmp)
@@ -593,7 +598,7 @@ def rank_command(args):
     pressures = {m["material"]: m.get("test_pressure_kpa") for m in metrics}
     own = {m["material"]: m.get("own_test_pressure_kpa", m.get("test_pressure_kpa")) for m in metrics}
     draws = {m["material"]: m["draws"] for m in metrics}
-    failed = {m["material"]: (m.get("n_failed", 0), m.get("n_draws", len(m["draws"]))) for m in metrics}
+    failed = {m["material"]: (m.get("n_failed", 0), m.get("n_draws", 0)) for m in metrics}
     for code, (n_failed, n_drawn) in failed.items():
         if n_failed:
             print(f"peano-bayes rank: WARNING: {code}: {_failed_draws(n_failed, n_drawn)}", file=sys.stderr)

@@ -32,7 +32,7 @@ from .defaults import (
     DEFAULT_WARMUP,
     HDI_PROB,
 )
-from .errors import PeanoBayesInputError
+from .errors import PeanoBayesError, PeanoBayesInputError
 from .formatting import format_number
 from .inference.coordinates import sampler_coordinates
 from .inference.fit import fit, fit_quality, predictions, residual_correlation, sensor_noise, structured_tests
@@ -50,6 +50,7 @@ from .inference.results import (
     write_netcdf,
 )
 from .inference.sample import sample, walker_count
+from .physics.model import ModelConfig
 
 BUNDLED_MATERIALS = bundled.MATERIALS
 #: Posterior contraction below which ``index.md`` says a parameter's posterior is close to its prior.
@@ -295,6 +296,14 @@ def _model_choice(dataset: Dataset, config, out: Path, *, discover: bool, resume
     return choice
 
 
+def _with_known_mounts(dataset: Dataset, config: ModelConfig) -> ModelConfig:
+    """``config`` with the mount in the model where some runs carry an added mount compliance (runs on a second,
+    known mount are there to measure it); ``config`` itself otherwise."""
+    if any(r.added_compliance > 0 for r in dataset.runs) and not config.mount:
+        return dataclasses.replace(config, mount=True)
+    return config
+
+
 def infer(
     data: str | Path | Dataset,
     out_dir: str | Path,
@@ -356,11 +365,10 @@ def infer(
         log=log,
         centre=whole_prior.median(),
     )
-    if any(r.added_compliance > 0 for r in dataset.runs) and not choice.config.mount:
-        # runs on a second, known mount only make sense with the mount in the model: they are there to measure it
+    config = _with_known_mounts(dataset, choice.config)
+    if config is not choice.config:
         log(f"{code}: some runs carry an added mount compliance, so the model includes the mount")
-        choice = dataclasses.replace(choice, config=dataclasses.replace(choice.config, mount=True))
-    config = choice.config
+        choice = dataclasses.replace(choice, config=config)
     prior = whole_prior.for_config(config)
     observations = prepare(dataset)
     posterior = build_posterior(observations, prior, config=config, held=() if sample_all else DEFAULT_HELD)
@@ -855,10 +863,16 @@ def report_results(out_dir: str | Path, materials=BUNDLED_MATERIALS, *, n_draws:
         directory = out_dir / code
         summaries.append(json.loads((directory / "summary.json").read_text()))
         references[code] = reference_models(directory, summaries[-1], log=log)
-        if not metrics_current(directory):
+        current = metrics_current(directory)
+        if not current:
             log(f"{code}: Table 3 metrics from {n_draws} posterior draws ...")
-            evaluate_result(directory, n_draws=n_draws, progress=False)
-        metrics[code] = read_metrics(directory)
+            try:
+                evaluate_result(directory, n_draws=n_draws, progress=False)
+                current = True
+            except PeanoBayesError as err:  # one material's metrics must not stop the others' report
+                log(f"{code}: no Table 3 metrics: {err}")
+        if current:
+            metrics[code] = read_metrics(directory)
         if not (directory / "figures" / "corner.png").exists():
             source = Path(summaries[-1]["dataset"])
             material_figures(directory, load(source) if source.exists() else None)
@@ -866,8 +880,10 @@ def report_results(out_dir: str | Path, materials=BUNDLED_MATERIALS, *, n_draws:
         results[code] = load_result(directory)
     prior_only = {name for m in metrics.values() for name, s in m["summary"].items() if s["from_prior"]}
     pressures = {c: m.get("test_pressure_kpa") for c, m in metrics.items()}
+    failed = {c: (m.get("n_failed", 0), m.get("n_draws", 0)) for c, m in metrics.items()}
+    draws = {c: m["draws"] for c, m in metrics.items()}
     ranking = (
-        rank_materials({c: m["draws"] for c, m in metrics.items()}, from_prior=prior_only, test_pressure_kpa=pressures)
+        rank_materials(draws, from_prior=prior_only, test_pressure_kpa=pressures, failed_draws=failed)
         if metrics
         else None
     )
@@ -1004,7 +1020,7 @@ def _check_inputs(dataset: Dataset, kwargs: dict) -> None:
     whole_prior = prior_of(selected, kwargs.get("prior"))
     if kwargs.get("n_walkers") is not None:
         held = () if kwargs.get("sample_all") else DEFAULT_HELD
-        config = whole_prior.config
+        config = _with_known_mounts(selected, whole_prior.config)
         posterior = build_posterior(prepare(selected), whole_prior.for_config(config), config=config, held=held)
         walker_count(kwargs["n_walkers"], posterior.ndim)
 

@@ -484,7 +484,8 @@ def recommend(
     compliance = mount_compliance_m_per_n
     if not (math.isfinite(compliance) and 0.0 <= compliance <= MAX_MOUNT_COMPLIANCE_M_PER_N):
         raise PeanoBayesInputError(
-            f"mount compliance: expected a number of m/N from 0 to {MAX_MOUNT_COMPLIANCE_M_PER_N:g} (100 mm/N), "
+            "mount compliance (--mount-compliance): expected a number of m/N from 0 to "
+            f"{MAX_MOUNT_COMPLIANCE_M_PER_N:g} (100 mm/N), "
             f"got {mount_compliance_m_per_n!r}"
         )
     from .inference.results import load_result

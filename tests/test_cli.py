@@ -244,3 +244,37 @@ def test_json_output_is_standard_json_with_null_where_a_value_is_not_finite(monk
 
     parsed = json.loads(capsys.readouterr().out, parse_constant=refuse)
     assert parsed == {"nan": None, "many": [None, 1.5], "narrow": 2.5, "n": 3}
+
+
+def test_a_dataset_stem_beside_its_result_folder_still_names_the_dataset(own_muscle, capsys):
+    stem = own_muscle.with_suffix("")
+    stem.mkdir()  # what 'fit my --out .' makes next to my.csv
+    assert main(["check", str(stem), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["file"] == str(own_muscle)
+
+
+def test_prior_new_refuses_a_prior_that_would_extend_itself_or_a_stand_in(tmp_path, capsys):
+    own = tmp_path / "PR.toml"
+    assert main(["prior", "new", "--like", "PR", "--out", str(own)]) == 2  # 'extends = "PR.toml"' finds itself
+    assert "would extend itself" in capsys.readouterr().err and not own.exists()
+    mine = tmp_path / "mine.toml"
+    assert main(["prior", "new", "--like", "TPC", "--out", str(mine)]) == 0
+    before = mine.read_text()
+    assert main(["prior", "new", "--like", str(mine), "--out", str(mine), "--force"]) == 2
+    assert "would extend itself" in capsys.readouterr().err and mine.read_text() == before
+    own.write_text(before)  # a file of one's own named like the bundled PR.toml
+    assert main(["prior", "new", "--like", "PR", "--out", str(tmp_path / "other.toml")]) == 2
+    assert "would stand in for the bundled PR.toml" in capsys.readouterr().err
+    assert not (tmp_path / "other.toml").exists()
+
+
+def test_an_os_error_that_names_no_path_is_a_failed_computation(monkeypatch, capsys):
+    from peano_bayes.commands import Command
+
+    def lost(args):
+        raise ConnectionRefusedError(111, "Connection refused")
+
+    monkeypatch.setitem(COMMANDS, "demo", Command("a stand-in", lost))
+    assert main(["demo"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("peano-bayes demo: failed:") and "Traceback" not in err

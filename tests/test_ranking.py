@@ -166,7 +166,9 @@ def test_ordering_summary_counts_each_verdict_once(rng):
 def test_rank_says_whose_metrics_rest_on_fewer_draws_than_were_drawn(tmp_path, rng, capsys):
     for code, failed in {"TP": 68, "P": 0}.items():
         (tmp_path / code).mkdir()
-        draws = {c: rng.normal(1.0, 0.1, 100 - failed).tolist() for c in CRITERIA}
+        draws = {c: rng.normal(1.0, 0.1, 100).tolist() for c in CRITERIA}
+        for values in draws.values():  # as metrics.json keeps them: NaN where a draw could not be simulated
+            values[:failed] = [float("nan")] * failed
         m = {"material": code, "n_draws": 100, "n_failed": failed, "draws": draws}
         (tmp_path / code / "metrics.json").write_text(json.dumps(m))
     assert main(["rank", str(tmp_path / "TP"), str(tmp_path / "P")]) == 0

@@ -47,6 +47,6 @@ def resolve_dataset(name: str | Path) -> Path:
     code; so the command line takes ``TP`` as well as ``path/to/TP.csv``."""
     path = Path(name)
     code = str(name).upper()  # material codes are case-blind, as ``prior new --like`` and ``run --materials``
-    if path.exists() or path.with_name(path.name + ".csv").exists() or code not in MATERIALS:
+    if code not in MATERIALS or path.is_file() or path.with_name(path.name + ".csv").is_file():
         return path
     return dataset_path(code)

@@ -58,14 +58,14 @@ _TOML_POSITION = re.compile(r"\s*\(at (?:line (\d+), column \d+|end of document)
 def dataset_paths(path: str | os.PathLike) -> tuple[Path, Path]:
     """``(csv_path, toml_path)`` of a dataset given its CSV path, its sidecar path or its stem."""
     p = Path(path)
-    if not p.name or p.is_dir():
+    if not p.name or (p.is_dir() and not p.with_name(p.name + ".csv").exists()):  # a stem beside its result folder
         raise DataFormatError(
             "a directory, not a dataset",
             file=str(path) or "''",
             expected="a dataset CSV (or its stem) with its TOML sidecar",
         )
     suffix = p.suffix.lower()
-    if p.exists() and suffix not in (".csv", ".toml"):
+    if p.is_file() and suffix not in (".csv", ".toml"):
         raise DataFormatError(f"not a dataset file (suffix {p.suffix!r})", file=str(path), expected="a .csv file")
     if suffix == ".csv":
         csv_path = p

@@ -681,19 +681,30 @@ def _loc_scale(path, name: str, entry: Mapping, dist: str) -> tuple[float, float
     return 0.0, 1.0
 
 
-def starting_prior(like: str, *, material: str = "MY", folder: str | os.PathLike = ".") -> str:
+def starting_prior(like: str, *, material: str = "MY", out: str | os.PathLike = "MY.toml") -> str:
     """The text of a prior file to edit for a muscle of one's own: it ``extends`` the prior of ``like`` (a
     bundled material code, or a prior file) so it keeps that prior's ``[config]``, and writes out every parameter
     entry of the merged prior, each with its unit and provenance, so the user sees the whole prior and edits in
-    place. ``material`` [str] is the code written into ``meta.material``; ``folder``, the folder the text will be
-    saved in: a bundled prior is extended by its name (resolved among the bundled priors), a file of one's own
-    by its path relative to ``folder``."""
+    place. ``material`` [str] is the code written into ``meta.material``; ``out``, the path the text will be
+    saved as: a bundled prior is extended by its name (resolved among the bundled priors), a file of one's own
+    by its path relative to ``out``'s folder. Raises :class:`PeanoBayesInputError` where ``out`` would extend
+    itself or a file beside it would stand in for the bundled prior (``extends`` looks next to the file first)."""
     import tomli_w
 
     prior = load_prior(like)
-    start = prior.files[-1]
+    start, out = prior.files[-1], Path(out)
     bundled = start.resolve().parent == DEFAULT_PRIORS_DIR.resolve()
-    extends = start.name if bundled else os.path.relpath(start.resolve(), Path(folder).resolve())
+    extends = start.name if bundled else os.path.relpath(start.resolve(), out.parent.resolve())
+    found = out.parent / extends
+    if found.resolve() == out.resolve():
+        raise PeanoBayesInputError(
+            f"{out}: would extend itself (the prior it starts from, {start}); choose another name"
+        )
+    if bundled and found.exists():
+        raise PeanoBayesInputError(
+            f"{out}: {found} would stand in for the bundled {start.name} it extends ('extends' is looked up next to "
+            "the file first); write the new prior in another folder"
+        )
     source = f"the bundled prior of {like}" if bundled else f"the prior file {start}"
     header = (
         f"# Prior for material {material}, started from {source} ({start.name}).\n"
