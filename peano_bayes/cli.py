@@ -73,21 +73,21 @@ def _use_compilation_cache() -> None:
         os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "1")
 
 
-def _strict_json(value):
+def strict_json(value):
     """``value`` with every non-finite float (NaN: a metric no draw defines) as ``None``, so ``--json`` prints
     standard JSON (``null``), which any reader accepts, rather than Python's ``NaN``."""
     if isinstance(value, float):
         return value if math.isfinite(value) else None
     if isinstance(value, dict):
-        return {k: _strict_json(v) for k, v in value.items()}
+        return {k: strict_json(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
-        return [_strict_json(v) for v in value]
+        return [strict_json(v) for v in value]
     return value
 
 
 def _json_number(value):
     """A number type JSON does not know (a NumPy scalar) as a float, or ``None`` where it is not finite."""
-    return _strict_json(float(value))
+    return strict_json(float(value))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -144,7 +144,7 @@ def _main(argv: list[str] | None) -> int:
             human.close()
     result = {} if result is None else result
     if args.json:
-        print(json.dumps(_strict_json(result), default=_json_number, allow_nan=False))
+        print(json.dumps(strict_json(result), default=_json_number, allow_nan=False))
     if result.get("converged") is False:
         print(f"{say}: WARNING: not converged (exit status {EXIT_UNCONVERGED})", file=sys.stderr)
         return EXIT_UNCONVERGED
