@@ -336,6 +336,9 @@ def test_malformed_prior_files_raise_named_errors(path, parameter, text):
     assert text in message
     if parameter != "-":
         assert f"parameter '{parameter}'" in message
+        lines = [line.strip() for line in path.read_text().splitlines()]
+        if f"[parameters.{parameter}]" in lines:  # the error points at the parameter's table
+            assert f"{path}, line {lines.index(f'[parameters.{parameter}]') + 1}: parameter" in message
 
 
 def test_unknown_material_code_suggests_a_near_one():

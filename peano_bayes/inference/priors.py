@@ -461,8 +461,29 @@ def prior_files(priors_dir: str | Path | None = None) -> tuple[Path, ...]:
 
 
 def _fail(path, message: str, name: str | None = None) -> PeanoBayesInputError:
-    where = f"{path}: parameter '{name}'" if name is not None else f"{path}"
+    """The error of a prior file ``path``, at the line of parameter ``name``'s table where the file has one."""
+    line = _entry_line(path, name) if name is not None else None
+    at = f"{path}, line {line}" if line is not None else f"{path}"
+    where = f"{at}: parameter '{name}'" if name is not None else at
     return PeanoBayesInputError(f"{where}: {message}")
+
+
+def _unknown_parameter(name: str) -> str:
+    return f"unknown parameter{did_you_mean(name, ALL_PARAMETERS)}; expected one of {', '.join(ALL_PARAMETERS)}"
+
+
+def _entry_line(path, name: str) -> int | None:
+    """1-based line of ``[parameters.<name>]`` (or of a ``<name> = ...`` key) in the prior file ``path``."""
+    try:
+        lines = Path(path).read_text(encoding="utf-8").splitlines()
+    except (OSError, UnicodeDecodeError, TypeError):
+        return None
+    table = f"[parameters.{name}]"
+    for number, text in enumerate(lines, start=1):
+        stripped = text.strip()
+        if stripped.replace(" ", "") == table or stripped.split("=")[0].strip() == name:
+            return number
+    return None
 
 
 def _resolve_start(code_or_path: str | Path, directory: Path) -> Path:
@@ -549,7 +570,7 @@ def _check_document(path: Path, doc: dict) -> None:
         raise _fail(path, f"meta.materials must be a list of material codes, got {meta['materials']!r}")
     for name, entry in doc.get("parameters", {}).items():
         if name not in ALL_PARAMETERS:
-            raise _fail(path, f"unknown parameter{did_you_mean(name, ALL_PARAMETERS)}; see PARAMETERS", name)
+            raise _fail(path, _unknown_parameter(name), name)
         if not isinstance(entry, dict):
             raise _fail(path, f"entry must be a table [parameters.{name}], got {entry!r}", name)
 
@@ -592,7 +613,7 @@ def parse_entry(path: Path | str, name: str, entry: Mapping[str, object]) -> Mar
     **Raises:** :class:`~peano_bayes.errors.PeanoBayesInputError` naming ``path``, ``name`` and the problem.
     """
     if name not in ALL_PARAMETERS:
-        raise _fail(path, f"unknown parameter{did_you_mean(name, ALL_PARAMETERS)}; see PARAMETERS", name)
+        raise _fail(path, _unknown_parameter(name), name)
     spec = ALL_PARAMETERS[name]
     for field in ("distribution", "unit", "provenance"):
         if field not in entry:
@@ -606,7 +627,7 @@ def parse_entry(path: Path | str, name: str, entry: Mapping[str, object]) -> Mar
             f"unknown distribution {dist!r}{did_you_mean(dist, _REQUIRED)}; expected one of {', '.join(_REQUIRED)}",
             name,
         )
-    allowed = _COMMON_FIELDS + _REQUIRED[dist]
+    allowed = tuple(dict.fromkeys(_COMMON_FIELDS + _REQUIRED[dist]))
     for field in entry:
         if field not in allowed:
             raise _fail(
