@@ -62,7 +62,8 @@ CASES = [
          "missing required column"),
     Case("header_only", "header_only.csv", None, None, None, "at least one run", "no data rows"),
     # -- CSV rows
-    Case("wrong_field_count", "wrong_field_count.csv", 7, None, 11, "10 fields", "wrong number of fields"),
+    Case("wrong_field_count", "wrong_field_count.csv", 7, None, 11,
+         "10 fields, as in the header; if the numbers use a decimal comma", "wrong number of fields"),
     Case("short_row", "short_row.csv", 10, None, 4, "10 fields", "wrong number of fields"),
     Case("unknown_test", "unknown_test.csv", 4, "test", "load_cylce", "one of load_cycle, blocking",
          "unknown test type (did you mean 'load_cycle'?)"),

@@ -269,12 +269,13 @@ def _parse_rows(
         if not fields or (len(fields) == 1 and not fields[0].strip()):
             continue  # blank line
         if len(fields) != n_fields:
+            comma = "; if the numbers use a decimal comma (0,5 for 0.5), write them with '.'"
             raise DataFormatError(
                 "wrong number of fields",
                 file=name,
                 row=row,
                 value=len(fields),
-                expected=f"{n_fields} fields, as in the header",
+                expected=f"{n_fields} fields, as in the header" + (comma if len(fields) > n_fields else ""),
             )
         test = fields[test_index].strip()
         if test not in TESTS:
