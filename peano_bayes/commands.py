@@ -598,6 +598,8 @@ def rank_command(args):
     pressures = {m["material"]: m.get("test_pressure_kpa") for m in metrics}
     own = {m["material"]: m.get("own_test_pressure_kpa", m.get("test_pressure_kpa")) for m in metrics}
     draws = {m["material"]: m["draws"] for m in metrics}
+    if len(metrics) == 1:
+        print("peano-bayes rank: WARNING: one result: it is best in every criterion by definition", file=sys.stderr)
     failed = {m["material"]: (m.get("n_failed", 0), m.get("n_draws", 0)) for m in metrics}
     for code, (n_failed, n_drawn) in failed.items():
         if n_failed:

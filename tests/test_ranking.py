@@ -103,6 +103,8 @@ def test_rank_command_writes_its_report_and_refuses_missing_metrics(tmp_path, rn
     assert main(["rank", str(tmp_path / "TP"), str(tmp_path / "P"), "--json"]) == 0
     report = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert report["materials"] == ["TP", "P"] and (tmp_path / "ranking.md").exists()
+    assert main(["rank", str(tmp_path / "TP"), "--out", str(tmp_path / "alone")]) == 0
+    assert "one result: it is best in every criterion by definition" in capsys.readouterr().err
     (tmp_path / "X").mkdir()
     assert main(["rank", str(tmp_path / "TP"), str(tmp_path / "X"), "--out", str(tmp_path / "new")]) == 2
     err = capsys.readouterr().err
