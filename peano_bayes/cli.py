@@ -112,7 +112,7 @@ def _main(argv: list[str] | None) -> int:
     say = f"peano-bayes {args.command}"
     # Human output goes to stdout, or to stderr under --json (stdout then holds the JSON object alone), or
     # nowhere under --quiet; warnings and errors always go to stderr.
-    human = sys.stderr if args.json else (open(os.devnull, "w") if args.quiet else sys.stdout)  # noqa: SIM115
+    human = open(os.devnull, "w") if args.quiet else (sys.stderr if args.json else sys.stdout)  # noqa: SIM115
     try:
         with contextlib.redirect_stdout(human):
             result = command.run(args)

@@ -58,6 +58,33 @@ def command(name: str, help: str):
     return decorate
 
 
+def _writable_folder(path, option: str) -> Path:
+    """``path`` as a folder a command may write into (existing, or creatable where its nearest existing parent is
+    a writable folder); otherwise :class:`PeanoBayesInputError` naming ``option``, before any work is done."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise PeanoBayesInputError(f"{option} {path}: a file; expected a folder (existing or new)")
+    parent = path
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
+        raise PeanoBayesInputError(f"{option} {path}: {parent} is not a folder this user can write into")
+    return path
+
+
+def _seed(text: str) -> int:
+    """A ``--seed`` value: a whole number >= 0 (NumPy's generators refuse negative seeds)."""
+    import argparse
+
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}")
+    return value
+
+
 _DATA_HELP = (
     "the dataset: a CSV with its TOML sidecar (or its stem), or a bundled material code "
     f"({' '.join(bundled.MATERIALS)})"
@@ -156,6 +183,7 @@ def simulate(args):
         csv_path, toml_path = dataset_paths(args.out)
     except PeanoBayesInputError as err:
         raise PeanoBayesInputError(f"--out: {err}") from None
+    _writable_folder(csv_path.parent, "--out")
     for path in (csv_path, toml_path):
         if path.is_dir():
             raise PeanoBayesInputError(f"--out: {path} is a directory; expected a file path like DIR/FC.csv")
@@ -204,7 +232,7 @@ def _simulate_arguments(p):
         help="[parameters] name = value in SI units, optional [config] ModelConfig fields (default: nominal values)",
     )
     p.add_argument("--out", required=True, metavar="PATH.csv", help="dataset to write (PATH.csv + PATH.toml)")
-    p.add_argument("--seed", type=int, default=0, help="seed of every random draw (default: 0)")
+    p.add_argument("--seed", type=_seed, default=0, help="seed of every random draw (default: 0)")
     p.add_argument(
         "--quirk",
         action="extend",
@@ -223,7 +251,7 @@ simulate.arguments = _simulate_arguments
 
 
 def _sampling_arguments(p):
-    p.add_argument("--seed", type=int, default=0, help="seed of the starts and the sampler (default: 0)")
+    p.add_argument("--seed", type=_seed, default=0, help="seed of the starts and the sampler (default: 0)")
     p.add_argument(
         "--tests",
         nargs="+",
@@ -334,6 +362,15 @@ def fit_command(args):
 
     options = _check_sampling(args)
     dataset = load(bundled.resolve_dataset(args.data))  # validate before anything is written
+    stem = Path(dataset.source_path).stem if dataset.source_path else dataset.material.code
+    target = Path(args.out) / (args.label if args.label is not None else stem)
+    if (target / "summary.json").exists() and not (args.resume or args.force):
+        raise PeanoBayesInputError(
+            f"{target}: holds a finished result; pass --force to fit again and replace it, or --label NAME (or "
+            "another --out) for a new folder"
+        )
+    if args.resume and not any((target / name).exists() for name in ("sampler_state.npz", "fit.json")):
+        print(f"peano-bayes fit: nothing saved in {target} to resume: starting a new fit", file=sys.stderr)
     summary = infer(
         dataset,
         args.out,
@@ -370,6 +407,7 @@ def _fit_arguments(p):
         "--label", metavar="NAME", default=None, help="name of the result folder (default: the data file's stem)"
     )
     p.add_argument("--resume", action="store_true", help="continue an interrupted run from its saved state")
+    p.add_argument("--force", action="store_true", help="fit again over a finished result in the same folder")
     p.add_argument("--no-figures", action="store_true", help="skip the figures (predictive band, corner plot)")
     _sampling_arguments(p)
 
@@ -482,9 +520,12 @@ def prior_command(args):
         raise PeanoBayesInputError("--material: expected a material code, got an empty string")
     material = args.material or out.stem
     text = starting_prior(args.like, material=material, out=out)
-    with replacing(out) as tmp:  # the file loads as it will in a fit before it replaces anything
-        write_into(tmp, text.encode("utf-8"))
-        prior = load_prior(tmp)
+    try:
+        with replacing(out) as tmp:  # the file loads as it will in a fit before it replaces anything
+            write_into(tmp, text.encode("utf-8"))
+            prior = load_prior(tmp)
+    except OSError as err:
+        raise PeanoBayesInputError(f"--out {out}: cannot be written ({err.strerror or err})") from None
     print(
         f"wrote {out}: the prior of {args.like} ({len(prior.names)} parameters) for material {material}; edit it, "
         f"then: peano-bayes fit DATA.csv --prior {out} --out results"
@@ -549,7 +590,7 @@ def _metrics_arguments(p):
     p.add_argument("--draws", type=int, default=100, help="posterior draws simulated (default: 100)")
     p.add_argument(
         "--seed",
-        type=int,
+        type=_seed,
         default=0,
         help="seed of the draws (prior values of unfitted parameters, model discrepancy) (default: 0)",
     )
@@ -583,12 +624,21 @@ def rank_command(args):
     from .ranking import rank_materials, ranking_markdown
 
     common = _pressure_kpa(args.pressure_kpa)
+    out = _writable_folder(args.out if args.out else Path(args.results[0]).resolve().parent, "--out")
+    for path in args.results:  # every input checked before any metrics are recomputed or anything written
+        if not Path(path).is_dir():
+            raise PeanoBayesInputError(f"{path}: not a result folder; expected a folder that 'peano-bayes fit' wrote")
+    given = [Path(p).resolve() for p in args.results]
+    again = sorted({str(p) for p in given if given.count(p) > 1})
+    if again:
+        raise PeanoBayesInputError(f"result(s) given more than once: {', '.join(again)}")
     for path in args.results:  # metrics simulated once per result and kept; an older version's recomputed
         if not Path(path).is_dir() or metrics_current(path, common):
             continue
         stale = (Path(path) / "posterior.nc").exists() and metrics_file(path).exists()
         if common is not None or stale:  # a result without metrics.json at its own pressure is refused below
-            evaluate_result(path, n_draws=previous_draws(path, common), test_pressure_kpa=common, progress=True)
+            n_previous = previous_draws(path, common)
+            evaluate_result(path, n_draws=n_previous, test_pressure_kpa=common, progress=not args.quiet)
     metrics = [read_metrics(path, common) for path in args.results]  # validate every input before writing
     codes = [m["material"] for m in metrics]
     twice = sorted({c for c in codes if codes.count(c) > 1})
@@ -607,7 +657,6 @@ def rank_command(args):
     report = rank_materials(
         draws, from_prior=prior_only, test_pressure_kpa=pressures, own_test_pressure_kpa=own, failed_draws=failed
     )
-    out = Path(args.out) if args.out else Path(args.results[0]).resolve().parent
     out.mkdir(parents=True, exist_ok=True)
     text = ranking_markdown(report)
     write_text(out / "ranking.json", json.dumps(report, indent=1))
@@ -642,10 +691,10 @@ def recommend_command(args):
     from .figures import recommendation_figure
     from .recommend import recommend, recommendation_markdown
 
+    spec = Path(args.spec)
+    out = _writable_folder(args.out if args.out else spec.parent, "--out")
     # validates the spec and every result before writing
     report = recommend(args.spec, args.results, mount_compliance_m_per_n=args.mount_compliance, seed=args.seed)
-    spec = Path(args.spec)
-    out = Path(args.out) if args.out else spec.parent
     out.mkdir(parents=True, exist_ok=True)
     stem = out / f"{spec.stem}_recommendation"
     text = recommendation_markdown(report)
@@ -670,7 +719,7 @@ def _recommend_arguments(p):
         metavar="M_PER_N",
         help="the design's mount compliance [m/N] in place of the rig's (default: 0, a stiff mount)",
     )
-    p.add_argument("--seed", type=int, default=0, help="seed of the new-specimen draws (default: 0)")
+    p.add_argument("--seed", type=_seed, default=0, help="seed of the new-specimen draws (default: 0)")
 
 
 recommend_command.arguments = _recommend_arguments
@@ -685,9 +734,13 @@ def discover_command(args):
     named = None if args.base is None else [name.strip() for name in args.base.split(",") if name.strip()]
     if named == []:
         raise PeanoBayesInputError(f"--base: expected comma-separated effect names, got {args.base!r}")
-    base = check_effects(named) if named is not None else DEFAULT_BASE
+    try:
+        base = check_effects(named) if named is not None else DEFAULT_BASE
+    except PeanoBayesInputError as err:
+        raise PeanoBayesInputError(f"--base: {err}") from None
     if args.max_effects < 1:
         raise PeanoBayesInputError(f"--max-effects must be >= 1, got {args.max_effects}")
+    _writable_folder(args.out, "--out")
     dataset = load(bundled.resolve_dataset(args.data))  # validate before anything is written
     split = discovery_data(dataset, specimen=args.specimen, tests=args.tests)
 
@@ -727,7 +780,7 @@ def _discover_arguments(p):
         help="tests to use (default: all in the file; a 1 kHz step response is the costly one)",
     )
     p.add_argument("--max-effects", type=int, default=3, help="most effects to add (default: 3)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the base fit's extra starts and the block tests")
+    p.add_argument("--seed", type=_seed, default=0, help="seed of the base fit's extra starts and the block tests")
 
 
 discover_command.arguments = _discover_arguments

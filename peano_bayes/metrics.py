@@ -547,11 +547,11 @@ def evaluate_result(
     result = posterior_metrics(
         idata, n_draws=n_draws, seed=seed, progress=bar, test_pressure_pa=pressure_pa, discrepancy=discrepancy
     )
-    if result.n_failed >= n_draws:  # nothing to summarize: say so rather than write a file of NaN
+    if n_draws - result.n_failed < 2:  # no interval to give: say so rather than write a file of NaN
         where = f" at {common:g} kPa" if common is not None else ""
         raise PeanoBayesError(
-            f"{material}: none of the {n_draws} posterior draws could be simulated{where} (the physics did not "
-            "converge); nothing written"
+            f"{material}: {n_draws - result.n_failed} of the {n_draws} posterior draws could be simulated{where} "
+            "(the physics did not converge), too few for an interval; nothing written"
         )
     summary = result.summary(hdi_prob)
     out = {

@@ -54,6 +54,9 @@ def test_json_output_is_the_only_thing_on_stdout(tmp_path, capsys, monkeypatch):
 def test_quiet_prints_nothing_on_success(capsys):
     assert main(["check", "TP", "--quiet"]) == 0
     assert capsys.readouterr().out == ""
+    assert main(["check", "TP", "--quiet", "--json"]) == 0  # the JSON object alone, and no summary on stderr
+    captured = capsys.readouterr()
+    assert json.loads(captured.out)["valid"] is True and captured.err == ""
 
 
 @pytest.fixture
@@ -266,6 +269,11 @@ def test_prior_new_refuses_a_prior_that_would_extend_itself_or_a_stand_in(tmp_pa
     assert main(["prior", "new", "--like", "PR", "--out", str(tmp_path / "other.toml")]) == 2
     assert "would stand in for the bundled PR.toml" in capsys.readouterr().err
     assert not (tmp_path / "other.toml").exists()
+    # nor one that would close a cycle: next.toml extends mine.toml, which is to be rewritten to extend next.toml
+    following = tmp_path / "next.toml"
+    assert main(["prior", "new", "--like", str(mine), "--out", str(following)]) == 0
+    assert main(["prior", "new", "--like", str(following), "--out", str(mine), "--force"]) == 2
+    assert "is in the chain of the prior it starts from" in capsys.readouterr().err and mine.read_text() == before
 
 
 def test_an_os_error_that_names_no_path_is_a_failed_computation(monkeypatch, capsys):
@@ -278,3 +286,36 @@ def test_an_os_error_that_names_no_path_is_a_failed_computation(monkeypatch, cap
     assert main(["demo"]) == 1
     err = capsys.readouterr().err
     assert err.startswith("peano-bayes demo: failed:") and "Traceback" not in err
+
+
+def test_a_negative_seed_is_refused_by_every_command_that_takes_one(capsys):
+    for argv in (["fit", "TP", "--out", "x"], ["metrics", "x"], ["discover", "TP", "--out", "x"], ["run"]):
+        with pytest.raises(SystemExit) as stop:
+            main([*argv, "--seed", "-1"])
+        assert stop.value.code == 2
+        assert "argument --seed: expected a whole number >= 0, got '-1'" in capsys.readouterr().err
+
+
+def test_fit_does_not_replace_a_finished_result_unless_asked(own_muscle, tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(pipeline, "infer", _fake_infer(True))
+    finished = tmp_path / "out" / "VM_first"
+    finished.mkdir(parents=True)
+    (finished / "summary.json").write_text("{}")
+    argv = ["fit", str(own_muscle), "--out", str(tmp_path / "out"), "--prior", "TPC"]
+    assert main(argv) == 2
+    assert "holds a finished result; pass --force" in capsys.readouterr().err
+    assert main([*argv, "--force"]) == 0
+    assert main([*argv, "--label", "fresh", "--resume"]) == 0
+    assert "nothing saved in" in capsys.readouterr().err
+
+
+def test_output_folders_are_checked_before_any_work(tmp_path, capsys):
+    taken = tmp_path / "taken"
+    taken.write_text("a file")
+    assert main(["discover", "TP", "--out", str(taken)]) == 2
+    assert f"--out {taken}: a file; expected a folder" in capsys.readouterr().err
+    assert main(["simulate", "--material", "TP", "--out", str(taken / "sim.csv")]) == 2
+    assert "--out" in capsys.readouterr().err and taken.read_text() == "a file"
+    (tmp_path / "TP").mkdir()
+    assert main(["rank", str(tmp_path / "TP"), str(tmp_path / "TP")]) == 2
+    assert "given more than once" in capsys.readouterr().err

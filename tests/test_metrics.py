@@ -167,7 +167,7 @@ def test_metrics_of_which_no_draw_could_be_simulated_are_not_written(result_dir,
     monkeypatch.setattr(metrics, "posterior_metrics", lambda idata, n_draws, **kw: SimpleNamespace(n_failed=n_draws))
     assert main(["metrics", str(tmp_path), "--draws", "3", "--no-progress", "--pressure-kpa", "900"]) == 1
     err = capsys.readouterr().err
-    assert "TP: none of the 3 posterior draws could be simulated at 900 kPa" in err and "Traceback" not in err
+    assert "TP: 0 of the 3 posterior draws could be simulated at 900 kPa" in err and "Traceback" not in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["posterior.nc"]
 
 

@@ -717,9 +717,10 @@ def starting_prior(like: str, *, material: str = "MY", out: str | os.PathLike = 
     bundled = start.resolve().parent == DEFAULT_PRIORS_DIR.resolve()
     extends = start.name if bundled else os.path.relpath(start.resolve(), out.parent.resolve())
     found = out.parent / extends
-    if found.resolve() == out.resolve():
+    if found.resolve() == out.resolve() or any(f.resolve() == out.resolve() for f in prior.files):
         raise PeanoBayesInputError(
-            f"{out}: would extend itself (the prior it starts from, {start}); choose another name"
+            f"{out}: would extend itself ({out.name} is in the chain of the prior it starts from, {start}); "
+            "choose another name"
         )
     if bundled and found.exists():
         raise PeanoBayesInputError(
