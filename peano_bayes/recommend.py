@@ -500,7 +500,11 @@ def recommend(
     for code in codes:
         directory = root / code
         if not (directory / "posterior.nc").exists():
-            raise PeanoBayesInputError(f"{directory}: no posterior.nc for material {code!r}")
+            named = "" if not spec.materials else f" (named in {spec_path} [candidates] materials)"
+            raise PeanoBayesInputError(
+                f"{directory}: no posterior.nc for material {code!r}{named}; expected a result folder per material "
+                f"under {root}"
+            )
         metrics = read_metrics(directory) if (directory / "metrics.json").exists() else None
         materials[code] = (load_result(directory), metrics)
         misfits[code] = result_discrepancy(directory)
