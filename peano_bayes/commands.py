@@ -626,8 +626,10 @@ def rank_command(args):
     common = _pressure_kpa(args.pressure_kpa)
     out = _writable_folder(args.out if args.out else Path(args.results[0]).resolve().parent, "--out")
     for path in args.results:  # every input checked before any metrics are recomputed or anything written
-        if not Path(path).is_dir():
-            raise PeanoBayesInputError(f"{path}: not a result folder; expected a folder that 'peano-bayes fit' wrote")
+        if not (Path(path).is_dir() or Path(path).is_file()):
+            raise PeanoBayesInputError(
+                f"{path}: no such result; expected a folder that 'peano-bayes fit' wrote (or its metrics file)"
+            )
     given = [Path(p).resolve() for p in args.results]
     again = sorted({str(p) for p in given if given.count(p) > 1})
     if again:
