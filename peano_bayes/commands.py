@@ -621,7 +621,7 @@ def rank_command(args):
 
     from .atomic import write_text
     from .metrics import evaluate_result, metrics_current, metrics_file, previous_draws, read_metrics
-    from .ranking import rank_materials, ranking_markdown
+    from .ranking import failed_draw_counts, rank_materials, ranking_markdown
 
     common = _pressure_kpa(args.pressure_kpa)
     out = _writable_folder(args.out if args.out else Path(args.results[0]).resolve().parent, "--out")
@@ -652,7 +652,7 @@ def rank_command(args):
     draws = {m["material"]: m["draws"] for m in metrics}
     if len(metrics) == 1:
         print("peano-bayes rank: WARNING: one result: it is best in every criterion by definition", file=sys.stderr)
-    failed = {m["material"]: (m.get("n_failed", 0), m.get("n_draws", 0)) for m in metrics}
+    failed = failed_draw_counts({m["material"]: m for m in metrics})
     for code, (n_failed, n_drawn) in failed.items():
         if n_failed:
             print(f"peano-bayes rank: WARNING: {code}: {_failed_draws(n_failed, n_drawn)}", file=sys.stderr)

@@ -854,7 +854,7 @@ def report_results(out_dir: str | Path, materials=BUNDLED_MATERIALS, *, n_draws:
     from .figures import cross_material_figures, material_figures
     from .inference.results import load_result
     from .metrics import evaluate_result, metrics_current, read_metrics
-    from .ranking import rank_materials, ranking_markdown
+    from .ranking import failed_draw_counts, rank_materials, ranking_markdown
 
     out_dir = Path(out_dir)
     finished = [c for c in materials if (out_dir / c / "summary.json").exists()]
@@ -880,8 +880,7 @@ def report_results(out_dir: str | Path, materials=BUNDLED_MATERIALS, *, n_draws:
         results[code] = load_result(directory)
     prior_only = {name for m in metrics.values() for name, s in m["summary"].items() if s["from_prior"]}
     pressures = {c: m.get("test_pressure_kpa") for c, m in metrics.items()}
-    failed = {c: (m.get("n_failed", 0), m.get("n_draws", 0)) for c, m in metrics.items()}
-    draws = {c: m["draws"] for c, m in metrics.items()}
+    draws, failed = {c: m["draws"] for c, m in metrics.items()}, failed_draw_counts(metrics)
     ranking = (
         rank_materials(draws, from_prior=prior_only, test_pressure_kpa=pressures, failed_draws=failed)
         if metrics

@@ -202,6 +202,12 @@ def ordering_checks(draws: dict) -> list[dict]:
     return out
 
 
+def failed_draw_counts(metrics: dict) -> dict:
+    """code -> ``(failed, drawn)`` of each material's metrics file contents (code -> ``metrics.json``), for
+    :func:`rank_materials`'s ``failed_draws``; files written before the counts existed count none."""
+    return {code: (m.get("n_failed", 0), m.get("n_draws", 0)) for code, m in metrics.items()}
+
+
 def rank_materials(
     draws: dict,
     from_prior=(),
@@ -367,6 +373,7 @@ __all__ = [
     "AGREEMENT",
     "PRACTICAL_MARGIN",
     "CRITERIA",
+    "failed_draw_counts",
     "EQUAL_BAND",
     "PARETO_CRITERIA",
     "PUBLISHED_ORDERINGS",
