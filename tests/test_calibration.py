@@ -136,3 +136,26 @@ def test_hierarchical_sbc_ranks_the_posteriors_levels_and_simulates_each_specime
         np.testing.assert_allclose(np.mean(population - log_m), 0.0, atol=0.06 * spread)  # se 0.011 tau
         np.testing.assert_allclose(np.std(population - log_m), spread / np.sqrt(2.0), rtol=0.05)
         np.testing.assert_allclose(np.std(new - population), spread, rtol=0.05)
+
+
+def test_the_acceptance_rules_chance_for_a_calibrated_sampler():
+    """experiments/sbc_acceptance_power.py: one calibrated quantity passes 85-95 % at 100 replicates with the
+    binomial probability, and its Monte Carlo gives single ** K for independent quantities and single for
+    quantities that move as one."""
+    import sys
+    from pathlib import Path
+
+    from scipy import stats
+
+    sys.path.insert(0, str(Path(__file__).parents[1] / "experiments"))
+    import sbc_acceptance_power as power
+
+    exact = stats.binom.cdf(95, 100, 0.9) - stats.binom.cdf(84, 100, 0.9)
+    assert abs(power.single_pass(100) - exact) < 1e-12
+    rng = np.random.default_rng(7)
+    studies = 4000
+    independent = power.dependent_pass(np.eye(3), 100, studies, rng)
+    se = np.sqrt(exact**3 * (1 - exact**3) / studies)
+    assert abs(independent - exact**3) < 4 * se
+    as_one = power.dependent_pass(np.full((3, 3), 0.999999) + 1e-6 * np.eye(3), 100, studies, rng)
+    assert abs(as_one - exact) < 4 * np.sqrt(exact * (1 - exact) / studies)

@@ -1,0 +1,104 @@
+"""How often a perfectly calibrated sampler passes the SBC acceptance rule "every quantity's 90 % interval
+covers 85-95 % of the truths", by the number of replicates and of ranked quantities.
+
+A calibrated 90 % interval covers each replicate's truth with probability 0.9, so with ``n`` replicates a
+quantity's coverage is Binomial(n, 0.9) / n. The rule fails a calibrated quantity whenever that falls outside
+[0.85, 0.95] (both ends count as inside). Reported per ``n``:
+
+- ``single``: the exact probability that one calibrated quantity passes;
+- ``expected_false_misses_K``: K * (1 - single), the expected number of calibrated quantities the rule fails
+  among K; a linear expectation, true whatever the dependence between quantities;
+- ``independent_pass_K``: single ** K, the chance that all K pass if their coverages were independent.
+  Coverages that move together (population and new-specimen values of one parameter) raise the joint chance,
+  so for positively dependent quantities this is a lower bound, ``single`` the upper;
+- ``measured_dependence_pass``: the same chance by Monte Carlo for the quantities of an SBC study's folder, with
+  their dependence taken from that study: the normal scores of its ranks give a correlation matrix, and each
+  simulated study draws ``n`` replicates of a Gaussian with it (calibrated by construction: every margin is
+  standard normal), a quantity covered where its score lies inside the central 90 %.
+
+The last line printed is one JSON object with every figure.
+
+    python experiments/sbc_acceptance_power.py [--study experiments/sbc-hierarchical-2] [--seed 0]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+from scipy import stats
+
+from peano_bayes.validation.sbc import RANK_DRAWS
+
+HERE = Path(__file__).resolve().parent
+BAND = (0.85, 0.95)
+LEVEL = 0.9
+
+
+def single_pass(n: int) -> float:
+    """P(0.85 <= X / n <= 0.95) for X ~ Binomial(n, 0.9): one calibrated quantity passes the rule."""
+    k = np.arange(n + 1)
+    inside = (k >= BAND[0] * n - 1e-9) & (k <= BAND[1] * n + 1e-9)
+    return float(stats.binom.pmf(k[inside], n, LEVEL).sum())
+
+
+def rank_correlation(study: Path) -> tuple[list[str], np.ndarray]:
+    """The quantities of an SBC folder's ``replicates.jsonl`` and the correlation of their ranks' normal scores."""
+    rows = [json.loads(line) for line in (study / "replicates.jsonl").read_text().splitlines() if line.strip()]
+    ranks = np.array([r["rank"] for r in rows], dtype=float)
+    scores = stats.norm.ppf((ranks + 0.5) / (RANK_DRAWS + 1))  # ranks lie in 0..RANK_DRAWS
+    return rows[0]["names"], np.corrcoef(scores, rowvar=False)
+
+
+def dependent_pass(correlation: np.ndarray, n: int, studies: int, rng: np.random.Generator) -> float:
+    """Monte Carlo chance that every quantity of a calibrated study with this dependence passes the rule."""
+    half = stats.norm.ppf(0.5 + LEVEL / 2)
+    chol = np.linalg.cholesky(correlation + 1e-12 * np.eye(len(correlation)))
+    passed = 0
+    for _ in range(studies):
+        z = rng.standard_normal((n, len(correlation))) @ chol.T
+        coverage = (np.abs(z) < half).mean(axis=0)
+        passed += bool(np.all((coverage >= BAND[0] - 1e-12) & (coverage <= BAND[1] + 1e-12)))
+    return passed / studies
+
+
+def main(argv=None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--study", type=Path, default=HERE / "sbc-hierarchical-2")
+    parser.add_argument("--replicates", type=int, nargs="+", default=[100, 200, 300, 400])
+    parser.add_argument("--quantities", type=int, nargs="+", default=[11, 18, 30])
+    parser.add_argument("--studies", type=int, default=20000, help="Monte Carlo studies per replicate count")
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args(argv)
+    rng = np.random.default_rng(args.seed)
+    names, correlation = rank_correlation(args.study)
+    off = correlation[~np.eye(len(names), dtype=bool)]
+    out = {
+        "band": list(BAND),
+        "study": str(args.study.name),
+        "study_quantities": len(names),
+        "study_rank_correlation_abs_max": float(np.abs(off).max()),
+        "rows": [],
+    }
+    for n in args.replicates:
+        p = single_pass(n)
+        row = {"replicates": n, "single": p}
+        for k in args.quantities:
+            row[f"expected_false_misses_{k}"] = k * (1 - p)
+            row[f"independent_pass_{k}"] = p**k
+        row["measured_dependence_pass"] = dependent_pass(correlation, n, args.studies, rng)
+        out["rows"].append(row)
+        print(
+            f"n={n}: one quantity passes {p:.3f}; "
+            + "; ".join(f"K={k}: {k * (1 - p):.2f} false misses expected, all pass {p**k:.3f} if independent"
+                        for k in args.quantities)
+            + f"; the {len(names)} quantities of {args.study.name} with its dependence: {row['measured_dependence_pass']:.3f}"
+        )
+    print(json.dumps(out))
+    return out
+
+
+if __name__ == "__main__":
+    main()
