@@ -15,6 +15,7 @@ import math
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -37,9 +38,9 @@ from .formatting import format_number
 from .inference.coordinates import sampler_coordinates
 from .inference.fit import fit, fit_quality, predictions, residual_correlation, sensor_noise, structured_tests
 from .inference.laplace import Laplace, NonCentred, posterior_mode, refine_mode
-from .inference.likelihood import prepare
+from .inference.likelihood import Observations, prepare
 from .inference.posterior import CONTRAST_PREFIX, DEFAULT_HELD, SPECIMEN_SD, Posterior, build_posterior
-from .inference.priors import load_prior
+from .inference.priors import Prior, load_prior
 from .inference.results import (
     NEW_SPECIMEN_PREFIX,
     RIDGE_CORRELATION,
@@ -304,6 +305,29 @@ def _with_known_mounts(dataset: Dataset, config: ModelConfig) -> ModelConfig:
     return config
 
 
+class PosteriorPlan(NamedTuple):
+    """What :func:`infer` samples for a dataset: the model (``config``, with the mount where runs carry a known
+    added compliance), its ``prior``, the binned ``observations``, the ``posterior`` and the walker count."""
+
+    config: ModelConfig
+    prior: Prior
+    observations: Observations
+    posterior: Posterior
+    n_walkers: int
+
+
+def _plan_posterior(
+    dataset: Dataset, whole_prior: Prior, config: ModelConfig, *, sample_all: bool, n_walkers: int | None
+) -> PosteriorPlan:
+    """The posterior of ``dataset`` (its tests already selected) under ``config`` and ``whole_prior``; raises
+    :class:`PeanoBayesInputError` for too few walkers (:func:`walker_count`)."""
+    config = _with_known_mounts(dataset, config)
+    prior = whole_prior.for_config(config)
+    observations = prepare(dataset)
+    posterior = build_posterior(observations, prior, config=config, held=() if sample_all else DEFAULT_HELD)
+    return PosteriorPlan(config, prior, observations, posterior, walker_count(n_walkers, posterior.ndim))
+
+
 def infer(
     data: str | Path | Dataset,
     out_dir: str | Path,
@@ -365,14 +389,12 @@ def infer(
         log=log,
         centre=whole_prior.median(),
     )
-    config = _with_known_mounts(dataset, choice.config)
-    if config is not choice.config:
+    # refuses too few walkers before anything is written
+    plan = _plan_posterior(dataset, whole_prior, choice.config, sample_all=sample_all, n_walkers=n_walkers)
+    if plan.config is not choice.config:
         log(f"{code}: some runs carry an added mount compliance, so the model includes the mount")
-        choice = dataclasses.replace(choice, config=config)
-    prior = whole_prior.for_config(config)
-    observations = prepare(dataset)
-    posterior = build_posterior(observations, prior, config=config, held=() if sample_all else DEFAULT_HELD)
-    n_walkers = walker_count(n_walkers, posterior.ndim)  # refuse too few walkers before anything is written
+        choice = dataclasses.replace(choice, config=plan.config)
+    config, prior, observations, posterior, n_walkers = plan
     out.mkdir(parents=True, exist_ok=True)
     log(
         f"{code}: {observations.n_bins} bins from {len(dataset.runs)} runs ({', '.join(dataset.tests)}); "
@@ -1018,10 +1040,8 @@ def _check_inputs(dataset: Dataset, kwargs: dict) -> None:
     selected = select_tests(dataset, kwargs.get("tests", DEFAULT_TESTS))
     whole_prior = prior_of(selected, kwargs.get("prior"))
     if kwargs.get("n_walkers") is not None:
-        held = () if kwargs.get("sample_all") else DEFAULT_HELD
-        config = _with_known_mounts(selected, whole_prior.config)
-        posterior = build_posterior(prepare(selected), whole_prior.for_config(config), config=config, held=held)
-        walker_count(kwargs["n_walkers"], posterior.ndim)
+        sample_all = bool(kwargs.get("sample_all"))
+        _plan_posterior(selected, whole_prior, whole_prior.config, sample_all=sample_all, n_walkers=kwargs["n_walkers"])
 
 
 def fit_many(
