@@ -60,6 +60,9 @@ from peano_bayes.validation.sbc import wilson_interval
 
 HERE = Path(__file__).resolve().parent
 TWO_EFFECTS = ("hysteresis", "flow_restriction")
+#: Runs after which a local worker is replaced: each run compiles its cases' models, which a worker keeps (two
+#: workers held 14 GB after about ten runs each; ``peano_bayes.fanout.make_executor``).
+UNITS_PER_WORKER = 8
 
 
 CASE_LABELS = (
@@ -124,10 +127,21 @@ def _todo(out: Path, snrs, noise_levels, seeds: int, first_seed: int, only=None)
     ]
 
 
-def run(out: Path, snrs, noise_levels, seeds: int, first_seed: int, jobs: int, only=None, scheduler=None) -> list[dict]:
+def run(
+    out: Path,
+    snrs,
+    noise_levels,
+    seeds: int,
+    first_seed: int,
+    jobs: int,
+    only=None,
+    scheduler=None,
+    units_per_worker: int | None = UNITS_PER_WORKER,
+) -> list[dict]:
     """Calibrate the strengths, then run the to-do list as work units of ``peano_bayes.fanout`` (``jobs`` local
-    processes, or the Dask cluster of ``scheduler``). This process alone appends each finished run to
-    ``OUT/runs.jsonl``; a run that raised is recorded as a wrong row, not hidden."""
+    processes, each replaced after ``units_per_worker`` runs, or the Dask cluster of ``scheduler``). This
+    process alone appends each finished run to ``OUT/runs.jsonl``; a run that raised is recorded as a wrong row,
+    not hidden."""
     out.mkdir(parents=True, exist_ok=True)
     strengths = _calibrate(out, cases(snrs, noise_levels, only))
     todo = _todo(out, snrs, noise_levels, seeds, first_seed, only)
@@ -147,7 +161,7 @@ def run(out: Path, snrs, noise_levels, seeds: int, first_seed: int, jobs: int, o
             print(f"{row['label']} snr {row['snr']:g} seed {row['seed']}: {row['outcome']} "
                   f"({'right' if row['correct'] else 'WRONG'})", flush=True)  # fmt: skip
 
-        with make_executor(scheduler, jobs) as (executor, info):
+        with make_executor(scheduler, jobs, units_per_worker=units_per_worker) as (executor, info):
             print(f"runs on {info.describe()}", flush=True)
             logs = None if executor is None else out / "logs"  # each run's output, kept per worker unit
             run_units(units, executor, on_result=finished, log=print, log_dir=logs)
@@ -295,6 +309,12 @@ def main(argv=None) -> int:
     parser.add_argument("--jobs", type=int, default=2, help="local worker processes")
     parser.add_argument("--scheduler", default=None, help="Dask scheduler: local:N or tcp://HOST:8786")
     parser.add_argument(
+        "--units-per-worker",
+        type=int,
+        default=UNITS_PER_WORKER,
+        help="runs after which a local worker process is replaced by a new one (frees its compiled programs)",
+    )
+    parser.add_argument(
         "--cases",
         nargs="+",
         choices=CASE_LABELS,
@@ -319,7 +339,17 @@ def main(argv=None) -> int:
         rows = [r for d in sources for r in _read_rows(d).values() if args.cases is None or r["label"] in args.cases]
     else:
         try:
-            rows = run(out, args.snr, args.noise, args.seeds, args.first_seed, args.jobs, args.cases, args.scheduler)
+            rows = run(
+                out,
+                args.snr,
+                args.noise,
+                args.seeds,
+                args.first_seed,
+                args.jobs,
+                args.cases,
+                args.scheduler,
+                args.units_per_worker,
+            )
         except PeanoBayesInputError as err:
             parser.error(str(err))
     out.mkdir(parents=True, exist_ok=True)
