@@ -60,9 +60,6 @@ from peano_bayes.validation.sbc import wilson_interval
 
 HERE = Path(__file__).resolve().parent
 TWO_EFFECTS = ("hysteresis", "flow_restriction")
-#: Runs after which a local worker is replaced: each run compiles its cases' models, which a worker keeps (two
-#: workers held 14 GB after about ten runs each; ``peano_bayes.fanout.make_executor``).
-UNITS_PER_WORKER = 8
 
 
 CASE_LABELS = (
@@ -136,10 +133,10 @@ def run(
     jobs: int,
     only=None,
     scheduler=None,
-    units_per_worker: int | None = UNITS_PER_WORKER,
+    fresh_workers: bool = True,
 ) -> list[dict]:
     """Calibrate the strengths, then run the to-do list as work units of ``peano_bayes.fanout`` (``jobs`` local
-    processes, each replaced after ``units_per_worker`` runs, or the Dask cluster of ``scheduler``). This
+    processes, a new one for each run when ``fresh_workers``, or the Dask cluster of ``scheduler``). This
     process alone appends each finished run to ``OUT/runs.jsonl``; a run that raised is recorded as a wrong row,
     not hidden."""
     out.mkdir(parents=True, exist_ok=True)
@@ -161,7 +158,7 @@ def run(
             print(f"{row['label']} snr {row['snr']:g} seed {row['seed']}: {row['outcome']} "
                   f"({'right' if row['correct'] else 'WRONG'})", flush=True)  # fmt: skip
 
-        with make_executor(scheduler, jobs, units_per_worker=units_per_worker) as (executor, info):
+        with make_executor(scheduler, jobs, fresh_workers=fresh_workers) as (executor, info):
             print(f"runs on {info.describe()}", flush=True)
             logs = None if executor is None else out / "logs"  # each run's output, kept per worker unit
             run_units(units, executor, on_result=finished, log=print, log_dir=logs)
@@ -309,10 +306,10 @@ def main(argv=None) -> int:
     parser.add_argument("--jobs", type=int, default=2, help="local worker processes")
     parser.add_argument("--scheduler", default=None, help="Dask scheduler: local:N or tcp://HOST:8786")
     parser.add_argument(
-        "--units-per-worker",
-        type=int,
-        default=UNITS_PER_WORKER,
-        help="runs after which a local worker process is replaced by a new one (frees its compiled programs)",
+        "--keep-workers",
+        action="store_true",
+        help="let a local worker serve many runs (default: a new process per run, since a worker keeps every "
+        "model it compiled and two of them filled the machine's memory in 2.5 h)",
     )
     parser.add_argument(
         "--cases",
@@ -348,7 +345,7 @@ def main(argv=None) -> int:
                 args.jobs,
                 args.cases,
                 args.scheduler,
-                args.units_per_worker,
+                not args.keep_workers,
             )
         except PeanoBayesInputError as err:
             parser.error(str(err))

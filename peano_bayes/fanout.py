@@ -336,7 +336,7 @@ class ExecutorInfo:
 
 @contextlib.contextmanager
 def make_executor(
-    scheduler: str | None = None, jobs: int = 1, *, units_per_worker: int | None = None
+    scheduler: str | None = None, jobs: int = 1, *, fresh_workers: bool = False
 ) -> Iterator[tuple[cf.Executor | None, ExecutorInfo]]:
     """``(executor, info)`` for :func:`run_units`, closed when the block ends.
 
@@ -346,16 +346,14 @@ def make_executor(
     - ``tcp://HOST:PORT``: the Dask cluster of that scheduler (its workers must have peano_bayes installed and
       see the output folder).
 
-    ``units_per_worker`` (local worker processes only): each worker process is replaced by a new one after
-    this many units. A worker keeps every program it compiled for as long as it lives, so a long fan-out of
-    units with different models grows without bound (the discovery benchmark's two workers reached 22 GB of
-    the machine's 24 in 2.5 h); a new worker reloads its programs from the persistent compilation cache.
-    ``None`` keeps the workers for the pool's life.
+    ``fresh_workers`` (local worker processes only): every unit runs in a new worker process. A worker keeps
+    every program it compiled for as long as it lives, so a long fan-out of units with different models grows
+    without bound (the discovery benchmark's two workers reached 22 GB of the machine's 24 in 2.5 h); a new
+    worker reads its programs from the persistent compilation cache. One unit per worker, not K: with more than
+    one, Python 3.11's pool stops replacing the workers that leave and waits for ever (CPython gh-115634).
     """
     if jobs < 1:
         raise PeanoBayesInputError(f"jobs must be >= 1, got {jobs}")
-    if units_per_worker is not None and units_per_worker < 1:
-        raise PeanoBayesInputError(f"units per worker must be >= 1, got {units_per_worker}")
     kind, detail = parse_scheduler(scheduler if scheduler is not None else os.environ.get(SCHEDULER_ENV))
     if kind == "processes":
         if jobs == 1:
@@ -363,7 +361,9 @@ def make_executor(
             return
         _settle_arviz_stamp()
         ctx = multiprocessing.get_context("spawn")
-        with cf.ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, max_tasks_per_child=units_per_worker) as pool:
+        with cf.ProcessPoolExecutor(
+            max_workers=jobs, mp_context=ctx, max_tasks_per_child=1 if fresh_workers else None
+        ) as pool:
             yield pool, ExecutorInfo("processes", jobs)
         return
     distributed = _dask()
