@@ -250,7 +250,8 @@ def _simulate_arguments(p):
 simulate.arguments = _simulate_arguments
 
 
-def _sampling_arguments(p):
+def _sampling_arguments(p, *, discover_by_default: bool = False):
+    """The fit's options; ``discover_by_default`` (the main job): discovery runs unless ``--no-discover``."""
     p.add_argument("--seed", type=_seed, default=0, help="seed of the starts and the sampler (default: 0)")
     p.add_argument(
         "--tests",
@@ -306,12 +307,21 @@ def _sampling_arguments(p):
         action="store_true",
         help="also sample the shape constants held at nominal by default (slow mixing; see docs/inference.md)",
     )
-    p.add_argument(
-        "--discover",
-        action="store_true",
-        help="run discovery on the data first and sample the configured model plus the physics effects it "
-        "names (report in <out>/<label>/discovery/; see docs/discovery.md)",
-    )
+    if discover_by_default:
+        p.add_argument(
+            "--no-discover",
+            dest="discover",
+            action="store_false",
+            help="sample each material's configured model without running discovery on its data first (default: "
+            "discovery first, and the configured model plus the physics effects it names is sampled)",
+        )
+    else:
+        p.add_argument(
+            "--discover",
+            action="store_true",
+            help="run discovery on the data first and sample the configured model plus the physics effects it "
+            "names (report in <out>/<label>/discovery/; see docs/discovery.md)",
+        )
 
 
 def _check_sampling(args):
@@ -466,7 +476,7 @@ def _run_arguments(p):
     p.add_argument("--out", default="results", metavar="DIR", help="output directory (default: results)")
     p.add_argument("--materials", nargs="+", default=list(bundled.MATERIALS), metavar="CODE", help="subset to run")
     _fanout_arguments(p, "materials")
-    _sampling_arguments(p)
+    _sampling_arguments(p, discover_by_default=True)
 
 
 run.arguments = _run_arguments

@@ -278,7 +278,7 @@ def _model_choice(dataset: Dataset, config, out: Path, *, discover: bool, resume
         if resumed_without and discover:
             log(
                 f"{dataset.material.code}: resuming a fit sampled without discovery; discovery not run (delete "
-                f"{out} to redo it with --discover)"
+                f"{out} to redo it with discovery)"
             )
         return configured_model(config)
     code = dataset.material.code
@@ -295,6 +295,16 @@ def _model_choice(dataset: Dataset, config, out: Path, *, discover: bool, resume
     if choice.not_in_model:
         log(f"{code}: named but not in the inference model: {', '.join(choice.not_in_model)}")
     return choice
+
+
+def _discovery_seconds(choice) -> float | None:
+    """How long the discovery behind ``choice`` ran [s], from its report (also when a resumed fit read the report
+    back); ``None`` for a model chosen without discovery or a report that does not say."""
+    report_file = None if choice.report is None else Path(choice.report) / "report.json"
+    if report_file is None or not report_file.is_file():
+        return None
+    seconds = json.loads(report_file.read_text()).get("seconds")
+    return None if seconds is None else float(seconds)
 
 
 def _with_known_mounts(dataset: Dataset, config: ModelConfig) -> ModelConfig:
@@ -389,6 +399,9 @@ def infer(
         log=log,
         centre=whole_prior.median(),
     )
+    seconds = _discovery_seconds(choice)
+    if seconds is not None:
+        timings["discovery_s"] = seconds
     # refuses too few walkers before anything is written
     plan = _plan_posterior(dataset, whole_prior, choice.config, sample_all=sample_all, n_walkers=n_walkers)
     if plan.config is not choice.config:
@@ -807,7 +820,9 @@ def index_markdown(
         t = s["timings_s"]
         lines += [
             "",
-            f"Timings: least squares {t['least_squares_s']:.1f} s, posterior mode {t.get('mode_s', 0.0):.1f} s, "
+            "Timings: "
+            + (f"discovery {t['discovery_s']:.1f} s, " if "discovery_s" in t else "")
+            + f"least squares {t['least_squares_s']:.1f} s, posterior mode {t.get('mode_s', 0.0):.1f} s, "
             f"compile {t['compile_s']:.1f} s, sampling {t['sampling_s']:.1f} s.",
             "",
         ]
@@ -968,7 +983,7 @@ def _infer_all(
             summary = json.loads(done.read_text())
             if not _can_continue(summary, out_dir / label, max_steps):
                 without = kwargs.get("discover") and (summary.get("model") or {}).get("discovery") is None
-                note = " (it was sampled without discovery: delete it to redo with --discover)" if without else ""
+                note = " (it was sampled without discovery: delete it to redo it with discovery)" if without else ""
                 log(f"{label}: {done} exists, skipped{note}")
                 summaries[label] = summary
                 continue

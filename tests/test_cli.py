@@ -319,3 +319,20 @@ def test_output_folders_are_checked_before_any_work(tmp_path, capsys):
     (tmp_path / "TP").mkdir()
     assert main(["rank", str(tmp_path / "TP"), str(tmp_path / "TP")]) == 2
     assert "given more than once" in capsys.readouterr().err
+
+
+def test_the_main_job_runs_discovery_first_unless_told_not_to(tmp_path, monkeypatch):
+    """``run`` samples the model discovery chooses for each material by default (``--no-discover``: the configured
+    model); ``fit-many``, like ``fit``, only with ``--discover``."""
+    import peano_bayes.pipeline as pipeline
+
+    seen = []
+    monkeypatch.setattr(pipeline, "run_bundled", lambda out, **kw: seen.append(("run", kw["discover"])) or [])
+    monkeypatch.setattr(pipeline, "fit_many", lambda paths, out, **kw: seen.append(("many", kw["discover"])) or [])
+    out = str(tmp_path / "r")
+    assert main(["run", "--out", out, "--materials", "TP"]) == 0
+    assert main(["run", "--out", out, "--materials", "TP", "--no-discover"]) == 0
+    data = str(bundled.dataset_path("TP"))
+    assert main(["fit-many", data, "--out", out]) == 0
+    assert main(["fit-many", data, "--out", out, "--discover"]) == 0
+    assert seen == [("run", True), ("run", False), ("many", False), ("many", True)]

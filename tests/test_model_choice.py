@@ -114,7 +114,7 @@ def test_a_resumed_fit_reads_the_discovery_report_instead_of_running_discovery(t
     from peano_bayes import bundled
     from peano_bayes.data import load
     from peano_bayes.discovery import choice as choice_module
-    from peano_bayes.pipeline import _model_choice
+    from peano_bayes.pipeline import _discovery_seconds, _model_choice
 
     def never(*args, **kwargs):
         raise AssertionError("discovery ran again")
@@ -129,6 +129,9 @@ def test_a_resumed_fit_reads_the_discovery_report_instead_of_running_discovery(t
     )
     assert choice.config.damping and choice.adopted == ("nonlinear_damping",) and choice.report == str(folder)
     assert any("discovery report read from" in line for line in lines)
+    assert _discovery_seconds(choice) is None  # this report does not say how long discovery took
+    (folder / "report.json").write_text(json.dumps({"verdict": "none", "named": [], "seconds": 107.5}))
+    assert _discovery_seconds(choice) == 107.5 and _discovery_seconds(configured_model(BARE)) is None
     assert _model_choice(None, BARE, tmp_path, discover=False, resume=False, seed=0, log=print).verdict is None
 
 
