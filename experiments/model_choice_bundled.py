@@ -4,12 +4,12 @@ The generating elements of each bundled file are its ``config_*`` entries and ph
 ``peano_bayes/bundled/data/true_parameters.toml``, read as library effects
 (:func:`peano_bayes.discovery.choice.effects_in`); an effect is visible in the fitted tests when one of them is
 among the tests its signature shows in (``Effect.shows_in``). The sampled model is read from each material's
-``summary.json`` in RESULTS (``model.effects``, written by ``peano-bayes run``/``fit``; with ``--discover`` it
+``summary.json`` in RESULTS (``model.effects``, written by ``peano-bayes run``/``fit``; with discovery it
 holds what discovery added) or, without RESULTS, is the configured model (the prior's ``[config]``), which
-``run`` samples without ``--discover`` and which discovery only adds to. With ``--discover OUT`` it runs the
-model choice of ``run --discover`` itself on each bundled file (discovery from the configured model on the
+``run --no-discover`` samples and which discovery only adds to. With ``--discover OUT`` it runs the
+model choice of ``run`` itself on each bundled file (discovery from the configured model on the
 fitted tests, :func:`peano_bayes.discovery.choice.choose_model`, seed 0, its base fit started at the prior's
-medians as ``run --discover`` does; reports in ``OUT/<code>/``; a report
+medians as ``run`` does; reports in ``OUT/<code>/``; a report
 already there is read back instead of run again) and checks the model that choice would sample.
 
     python experiments/model_choice_bundled.py [RESULTS | --discover OUT]
@@ -42,7 +42,7 @@ def generating_effects(entry: dict) -> set[str]:
 
 
 def discovered(code: str, out: Path) -> tuple[list[str], set[str], dict]:
-    """The fitted tests, the effects of the model ``run --discover`` samples, and discovery's record, for the
+    """The fitted tests, the effects of the model ``run`` samples, and discovery's record, for the
     bundled file ``code`` (discovery run into ``out/code`` unless its report is there already)."""
     dataset = select_tests(load(dataset_path(code)), DEFAULT_TESTS)
     prior = load_prior(code)
@@ -95,7 +95,7 @@ def main(argv: list[str]) -> int:
             "discovery": discovery,
         }
     if discover_out is not None:
-        source = f"run --discover's model choice (reports in {discover_out})"
+        source = f"run's model choice (reports in {discover_out})"
     else:
         source = str(results) if results is not None else "configured models (bundled priors)"
     print(json.dumps({"source": source, "materials": out, "all_contained": all_contained}))
