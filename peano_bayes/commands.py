@@ -8,6 +8,7 @@ command exit with status 3.
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import os
@@ -307,21 +308,14 @@ def _sampling_arguments(p, *, discover_by_default: bool = False):
         action="store_true",
         help="also sample the shape constants held at nominal by default (slow mixing; see docs/inference.md)",
     )
-    if discover_by_default:
-        p.add_argument(
-            "--no-discover",
-            dest="discover",
-            action="store_false",
-            help="sample each material's configured model without running discovery on its data first (default: "
-            "discovery first, and the configured model plus the physics effects it names is sampled)",
-        )
-    else:
-        p.add_argument(
-            "--discover",
-            action="store_true",
-            help="run discovery on the data first and sample the configured model plus the physics effects it "
-            "names (report in <out>/<label>/discovery/; see docs/discovery.md)",
-        )
+    p.add_argument(
+        "--discover",
+        action=argparse.BooleanOptionalAction,
+        default=discover_by_default,
+        help="run discovery on the data first and sample the configured model plus the physics effects it names "
+        "(report in <out>/<label>/discovery/; see docs/discovery.md); --no-discover samples the configured model "
+        f"(default: {'--discover' if discover_by_default else '--no-discover'})",
+    )
 
 
 def _check_sampling(args):

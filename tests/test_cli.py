@@ -332,7 +332,8 @@ def test_the_main_job_runs_discovery_first_unless_told_not_to(tmp_path, monkeypa
     out = str(tmp_path / "r")
     assert main(["run", "--out", out, "--materials", "TP"]) == 0
     assert main(["run", "--out", out, "--materials", "TP", "--no-discover"]) == 0
+    assert main(["run", "--out", out, "--materials", "TP", "--discover"]) == 0  # the default, said out loud
     data = str(bundled.dataset_path("TP"))
     assert main(["fit-many", data, "--out", out]) == 0
     assert main(["fit-many", data, "--out", out, "--discover"]) == 0
-    assert seen == [("run", True), ("run", False), ("many", False), ("many", True)]
+    assert seen == [("run", True), ("run", False), ("run", True), ("many", False), ("many", True)]
