@@ -1,0 +1,47 @@
+"""experiments/discrepancy_truth_bound.py: which rows of a benchmark run it checks, and its bad-input message.
+(The check itself refits discovery models, about 100 s a row; its output reports the recomputed base's gap
+beside the run's, so each row it writes carries its own consistency check.)"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parents[1] / "experiments"))
+import discrepancy_truth_bound as tb  # noqa: E402
+
+
+def _row(label, seed, ratio, *, correct=True, effects=None):
+    effects = effects if effects is not None else [label.split("@")[0]]
+    return {"key": f"{label}|2|0.2|0|{seed}", "label": label, "effects": effects, "correct": correct,
+            "gap_ratio": ratio, "seed": seed, "snr": 2.0, "force_sd_n": 0.2}  # fmt: skip
+
+
+def test_rows_checked_are_correct_single_effect_detections_misses_first(tmp_path):
+    rows = [
+        _row("hysteresis", 1, 0.3),
+        _row("hysteresis", 2, 0.9),
+        _row("hysteresis", 3, 0.6),
+        _row("hysteresis", 4, 0.7, correct=False),  # a miss of the effect: no detection to score
+        _row("hysteresis", 5, float("nan")),  # no gap scored
+        _row("series_compliance@2mounts", 6, 0.8),  # two mounts: not a session this script rebuilds
+        _row("hysteresis+flow_restriction", 7, 0.8, effects=["hysteresis", "flow_restriction"]),
+        _row("strain_stiffening", 8, 0.4),
+    ]
+    (tmp_path / "runs.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    chosen = tb.candidate_rows(tmp_path, None, per_effect=2)
+    assert [(r["label"], r["seed"]) for r in chosen] == [("hysteresis", 2), ("hysteresis", 3), ("strain_stiffening", 8)]
+    only = tb.candidate_rows(tmp_path, ["strain_stiffening"], per_effect=5)
+    assert [r["seed"] for r in only] == [8]
+
+
+def test_a_folder_that_is_not_a_run_is_refused_with_exit_2(tmp_path, capsys):
+    with pytest.raises(SystemExit) as stop:
+        tb.main(["--run", str(tmp_path)])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err
+    assert "is not a benchmark run's folder" in err and "strengths.json" in err
+    assert not (tmp_path / "checks").exists()
