@@ -4,7 +4,7 @@ Cases (peano_bayes.validation.discovery_benchmark): each hideable library effect
 effect at several noise levels (false positives); slow load-cell drift (outside the library); two effects at
 once; and a null on another physics (``none-veale``: data from Veale's force-balance model, where any named
 physics effect is a false positive). ``--seeds`` seeds per case, starting at ``--first-seed`` (default
-10000). The label never reaches ``discover``.
+20002, the tuning seeds). The label never reaches ``discover``.
 
 **Seeds.** A final run uses seeds no earlier run used, so the workflow is never judged on the data it was
 tuned on. The tests use 100-199; every other seed below 12000 is spent (the runs behind them are in the git history of
@@ -28,7 +28,7 @@ their rows gzip-compressed, ``runs-<worker>.jsonl.gz``; all are read the same wa
 ``OUT/confusion.csv``, ``OUT/recall.csv``, ``OUT/false_positives.csv``, ``OUT/gap.csv``, ``OUT/BENCHMARK.md``
 and prints one JSON object as its last line.
 
-    python experiments/discrepancy_benchmark.py --jobs 2
+    python experiments/discrepancy_benchmark.py --jobs 2 --seeds 2 --out /tmp/tuning   # tuning seeds 20002-20003
 """
 
 from __future__ import annotations
@@ -298,11 +298,13 @@ def analyse(rows: list[dict], out: Path, pooled_from=()) -> dict:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", default=str(HERE / "discrepancy-10000"), help="output directory")
+    parser.add_argument("--out", required=True, help="output directory (a final run: discrepancy-<first seed>)")
     parser.add_argument("--snr", type=float, nargs="+", default=[2.0], help="signal-to-noise ratios")
     parser.add_argument("--noise", type=float, nargs="+", default=[0.1, 0.2, 0.4], help="force noise levels [N]")
     parser.add_argument("--seeds", type=int, default=22, help="seeds per case")
-    parser.add_argument("--first-seed", type=int, default=10000)
+    parser.add_argument(
+        "--first-seed", type=int, default=20002, help="first seed (default: the tuning seeds; see the seed history)"
+    )
     parser.add_argument("--jobs", type=int, default=2, help="local worker processes")
     parser.add_argument("--scheduler", default=None, help="Dask scheduler: local:N or tcp://HOST:8786")
     parser.add_argument(

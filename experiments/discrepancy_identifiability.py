@@ -4,7 +4,7 @@ The benchmark's SNR (peano_bayes.validation.discovery_benchmark) is ``max over t
 sigma`` at *equal* base parameters. Discovery, though, sees only what is left after the base model (tensile +
 bending stiffness, free) is refitted: the part of the effect's signal the base cannot mimic. This script measures
 that part. For each hideable effect at the strength the final benchmark used for SNR 2 (``--strengths``, default the
-current final run's ``experiments/discrepancy-10000/strengths.json``), it simulates the harness's rig data with the
+current final run's ``experiments/discrepancy-14000/strengths.json``), it simulates the harness's rig data with the
 load-cell noise shrunk ``--shrink`` times (so the fit sees the same relative weights of force and strain tests but
 noise does not blur the misfit), fits the base model from four starts and the base plus the hidden effect from the
 truth, and reports per test the RMS of the binned misfit on the fitted and held-out runs, in units of the rig's
@@ -88,7 +88,7 @@ def _coupon_fit(free_base, truth, factor: float, split):
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--strengths", default=str(HERE / "discrepancy-10000" / "strengths.json"))
+    parser.add_argument("--strengths", default=str(HERE / "discrepancy-14000" / "strengths.json"))
     parser.add_argument("--snr", type=float, default=2.0)
     parser.add_argument("--shrink", type=float, default=100.0, help="noise divisor of the simulated data")
     parser.add_argument("--seed", type=int, default=0)
@@ -101,7 +101,7 @@ def main(argv=None) -> int:
         metavar="FACTOR",
         help="also fit the base with its tensile stiffness pinned at FACTOR x the truth",
     )
-    parser.add_argument("--out", default=str(HERE / "discrepancy-10000" / "checks" / "identifiability"))
+    parser.add_argument("--out", default=str(HERE / "discrepancy-14000" / "checks" / "identifiability"))
     args = parser.parse_args(argv)
     enable_compilation_cache()
     strengths = json.loads(Path(args.strengths).read_text())

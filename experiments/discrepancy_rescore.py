@@ -6,7 +6,7 @@ elpd, keeps the other gates as logged, and counts the candidates whose pass/fail
 the run's every decision, and so its verdicts and tables, are the same under the current gates; on a run logged
 before a change of gate 6 it shows what the change would have rejected or let through.
 
-    python experiments/discrepancy_rescore.py experiments/discrepancy-10000 experiments/discrepancy-11000
+    python experiments/discrepancy_rescore.py experiments/discrepancy-14000
 
 Last line: one JSON object, per directory the number of runs, candidates, and flips (with their keys).
 """

@@ -1,6 +1,7 @@
-"""experiments/discrepancy_truth_bound.py: which rows of a benchmark run it checks, and its bad-input message.
-(The check itself refits discovery models, about 100 s a row; its output reports the recomputed base's gap
-beside the run's, so each row it writes carries its own consistency check.)"""
+"""The discovery benchmark's check scripts, without their refits (about 100 s a row): which rows
+experiments/discrepancy_truth_bound.py checks (its output reports the recomputed base's gap beside the run's, so
+each row carries its own consistency check), how experiments/discrepancy_rerun.py compares a re-run row with the
+record, and their bad-input messages."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "experiments"))
+import discrepancy_rerun as rerun  # noqa: E402
 import discrepancy_truth_bound as tb  # noqa: E402
 
 
@@ -45,3 +47,25 @@ def test_a_folder_that_is_not_a_run_is_refused_with_exit_2(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "is not a benchmark run's folder" in err and "strengths.json" in err
     assert not (tmp_path / "checks").exists()
+
+
+def test_a_rerun_row_is_compared_exactly_in_names_and_relatively_in_numbers():
+    recorded = {"outcome": "hysteresis", "named": ["hysteresis"], "seconds": 10.0, "n": 3, "x": 1.0,
+                "screened": [{"a": {"delta_elpd": 2.0, "passed": True}}], "gap": float("nan")}  # fmt: skip
+    same = {**recorded, "seconds": 99.0}
+    assert rerun.differences(recorded, same) == ([], [])
+    moved = {**recorded, "x": 1.01, "n": 3.0, "screened": [{"a": {"delta_elpd": 2.0, "passed": False}}]}
+    exact, numeric = rerun.differences(recorded, moved)
+    assert exact == ["/screened[0]/a/passed"]
+    assert [p for p, _ in numeric] == ["/x"] and numeric[0][1] == pytest.approx(0.01 / 1.01)
+    assert rerun.differences(recorded, {**recorded, "named": []})[0] == ["/named (length 1 vs 0)"]
+    assert rerun.differences(recorded, {k: v for k, v in recorded.items() if k != "n"})[0] == ["/n (missing)"]
+
+
+def test_a_rerun_of_an_unknown_key_is_refused_with_exit_2(tmp_path, capsys):
+    (tmp_path / "strengths.json").write_text("{}")
+    (tmp_path / "runs.jsonl").write_text(json.dumps(_row("hysteresis", 1, 0.3)) + "\n")
+    with pytest.raises(SystemExit) as stop:
+        rerun.main(["--run", str(tmp_path), "--keys", "hysteresis|2|0.2|0|2"])
+    assert stop.value.code == 2
+    assert "no row with key 'hysteresis|2|0.2|0|2'" in capsys.readouterr().err
