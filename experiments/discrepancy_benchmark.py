@@ -84,6 +84,16 @@ def cases(snrs, noise_levels, only=None) -> list[Case]:
     return [c for c in out if only is None or c.label in only]
 
 
+def case_of_row(row: dict) -> Case:
+    """The case a recorded row was run on (found by its ``key`` among :func:`cases` at the row's SNR and force
+    noise). Raises KeyError naming the key when today's cases hold none with that key."""
+    seed = int(row["seed"])
+    found = [c for c in cases([row["snr"] or 2.0], [row["force_sd_n"]]) if run_key(c, seed) == row["key"]]
+    if len(found) != 1:
+        raise KeyError(f"no case of today's benchmark has the key {row['key']!r}")
+    return found[0]
+
+
 def _calibrate(out: Path, all_cases) -> dict:
     path = out / "strengths.json"
     strengths = json.loads(path.read_text()) if path.exists() else {}

@@ -24,18 +24,19 @@ import sys
 from pathlib import Path
 
 from peano_bayes import enable_compilation_cache
-from peano_bayes.validation.discovery_benchmark import run_case, run_key
+from peano_bayes.validation.discovery_benchmark import run_case
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from discrepancy_benchmark import cases, log_rows, run_logs  # noqa: E402
+from discrepancy_benchmark import case_of_row, log_rows, run_logs  # noqa: E402
 
 #: Fields that differ on every run by design.
 IGNORED = frozenset({"seconds"})
 
 
 def differences(recorded, rerun, path: str = "") -> tuple[list[str], list[tuple[str, float]]]:
-    """Where ``rerun`` differs from ``recorded`` (JSON-like values): non-numeric paths, and numeric paths with
-    their relative difference |a - b| / max(|a|, |b|). NaN equals NaN; an int and a float of equal value agree."""
+    """Where ``rerun`` differs from ``recorded`` (JSON-like values): non-numeric paths (with a number that is
+    NaN or infinite on one side only), and numeric paths with their relative difference |a - b| / max(|a|, |b|).
+    NaN equals NaN; an int and a float of equal value agree."""
     exact, numeric = [], []
     if isinstance(recorded, dict) and isinstance(rerun, dict):
         for k in sorted(set(recorded) | set(rerun)):
@@ -56,8 +57,12 @@ def differences(recorded, rerun, path: str = "") -> tuple[list[str], list[tuple[
             numeric += n
     elif _number(recorded) and _number(rerun) and (isinstance(recorded, float) or isinstance(rerun, float)):
         a, b = float(recorded), float(rerun)
-        if not (a == b or (math.isnan(a) and math.isnan(b))):
+        if a == b or (math.isnan(a) and math.isnan(b)):
+            pass
+        elif math.isfinite(a) and math.isfinite(b):
             numeric.append((path, abs(a - b) / max(abs(a), abs(b))))
+        else:  # NaN or infinite on one side only: a change of kind, not of round-off
+            exact.append(f"{path} ({a!r} vs {b!r})")
     elif recorded != rerun:
         exact.append(path)
     return exact, numeric
@@ -82,10 +87,10 @@ def main(argv=None) -> int:
     strengths = json.loads((run / "strengths.json").read_text())
     by_key = {}
     for key in args.keys:
-        seed = int(recorded[key]["seed"])
-        by_key[key] = next(
-            c for c in cases([recorded[key]["snr"] or 2.0], [recorded[key]["force_sd_n"]]) if run_key(c, seed) == key
-        )
+        try:
+            by_key[key] = case_of_row(recorded[key])
+        except KeyError as err:
+            parser.error(err.args[0])
     enable_compilation_cache()
     summary = {}
     for key in args.keys:

@@ -11,33 +11,56 @@ from pathlib import Path
 
 import pytest
 
+from peano_bayes.validation.discovery_benchmark import run_key
+
 sys.path.insert(0, str(Path(__file__).parents[1] / "experiments"))
+import discrepancy_benchmark as bench  # noqa: E402
 import discrepancy_rerun as rerun  # noqa: E402
 import discrepancy_truth_bound as tb  # noqa: E402
 
 
-def _row(label, seed, ratio, *, correct=True, effects=None):
+def _row(label, seed, ratio, *, correct=True, effects=None, outcome=None, scored=True):
     effects = effects if effects is not None else [label.split("@")[0]]
     return {"key": f"{label}|2|0.2|0|{seed}", "label": label, "effects": effects, "correct": correct,
-            "gap_ratio": ratio, "seed": seed, "snr": 2.0, "force_sd_n": 0.2}  # fmt: skip
+            "outcome": outcome or "+".join(sorted(effects)), "gap_ratio": ratio, "seed": seed, "snr": 2.0,
+            "force_sd_n": 0.2, "truth_gap": {effects[0]: {"ratio": ratio}} if scored and effects else None}  # fmt: skip
 
 
-def test_rows_checked_are_correct_single_effect_detections_misses_first(tmp_path):
+def test_rows_checked_are_exact_single_effect_detections_misses_first(tmp_path):
     rows = [
         _row("hysteresis", 1, 0.3),
         _row("hysteresis", 2, 0.9),
         _row("hysteresis", 3, 0.6),
         _row("hysteresis", 4, 0.7, correct=False),  # a miss of the effect: no detection to score
         _row("hysteresis", 5, float("nan")),  # no gap scored
-        _row("series_compliance@2mounts", 6, 0.8),  # two mounts: not a session this script rebuilds
+        _row("hysteresis", 9, 0.95, outcome="ambiguous{hysteresis,viscoelastic_relaxation}"),  # may hold the rival
+        _row("hysteresis", 10, 0.99, scored=False),  # a run scored before the truth-scored gap
+        _row("series_compliance@2mounts", 6, 0.8),  # two mounts: rebuilt like the others
         _row("hysteresis+flow_restriction", 7, 0.8, effects=["hysteresis", "flow_restriction"]),
         _row("strain_stiffening", 8, 0.4),
     ]
     (tmp_path / "runs.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
     chosen = tb.candidate_rows(tmp_path, None, per_effect=2)
-    assert [(r["label"], r["seed"]) for r in chosen] == [("hysteresis", 2), ("hysteresis", 3), ("strain_stiffening", 8)]
+    assert [(r["label"], r["seed"]) for r in chosen] == [
+        ("hysteresis", 2),
+        ("hysteresis", 3),
+        ("series_compliance@2mounts", 6),
+        ("strain_stiffening", 8),
+    ]
     only = tb.candidate_rows(tmp_path, ["strain_stiffening"], per_effect=5)
     assert [r["seed"] for r in only] == [8]
+
+
+def test_every_recorded_case_kind_is_found_again_from_its_row():
+    """Both scripts rebuild a row's case from its key: every case of the benchmark at SNR 2 and 4, each noise
+    level, drift, two effects, the other-physics null and the two-mount cases, comes back as itself."""
+    for snr in (2.0, 4.0):
+        for case in bench.cases([snr], [0.1, 0.2, 0.4]):
+            key = run_key(case, 14001)
+            row = {"key": key, "seed": 14001, "snr": case.snr, "force_sd_n": case.force_sd_n}
+            assert bench.case_of_row(row) == case, key
+    with pytest.raises(KeyError, match="no case of today's benchmark has the key 'retired_effect"):
+        bench.case_of_row({"key": "retired_effect|2|0.2|0|1", "seed": 1, "snr": 2.0, "force_sd_n": 0.2})
 
 
 def test_a_folder_that_is_not_a_run_is_refused_with_exit_2(tmp_path, capsys):
@@ -60,6 +83,9 @@ def test_a_rerun_row_is_compared_exactly_in_names_and_relatively_in_numbers():
     assert [p for p, _ in numeric] == ["/x"] and numeric[0][1] == pytest.approx(0.01 / 1.01)
     assert rerun.differences(recorded, {**recorded, "named": []})[0] == ["/named (length 1 vs 0)"]
     assert rerun.differences(recorded, {k: v for k, v in recorded.items() if k != "n"})[0] == ["/n (missing)"]
+    # a number that turns NaN (or from NaN into a number) is a change of kind, never round-off
+    assert rerun.differences(recorded, {**recorded, "gap": 0.4}) == (["/gap (nan vs 0.4)"], [])
+    assert rerun.differences(recorded, {**recorded, "x": float("inf")}) == (["/x (1.0 vs inf)"], [])
 
 
 def test_a_rerun_of_an_unknown_key_is_refused_with_exit_2(tmp_path, capsys):
