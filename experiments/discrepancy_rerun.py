@@ -36,7 +36,9 @@ IGNORED = frozenset({"seconds"})
 def differences(recorded, rerun, path: str = "") -> tuple[list[str], list[tuple[str, float]]]:
     """Where ``rerun`` differs from ``recorded`` (JSON-like values): non-numeric paths (with a number that is
     NaN or infinite on one side only), and numeric paths with their relative difference |a - b| / max(|a|, |b|).
-    NaN equals NaN; an int and a float of equal value agree."""
+    NaN equals NaN; an int and a float of equal value agree. Numeric entries are (path, relative difference,
+    recorded, rerun): a quantity at round-off of zero (an effect's gain where it has none) can differ by more
+    than itself, so the worst entries are printed with their values."""
     exact, numeric = [], []
     if isinstance(recorded, dict) and isinstance(rerun, dict):
         for k in sorted(set(recorded) | set(rerun)):
@@ -60,7 +62,7 @@ def differences(recorded, rerun, path: str = "") -> tuple[list[str], list[tuple[
         if a == b or (math.isnan(a) and math.isnan(b)):
             pass
         elif math.isfinite(a) and math.isfinite(b):
-            numeric.append((path, abs(a - b) / max(abs(a), abs(b))))
+            numeric.append((path, abs(a - b) / max(abs(a), abs(b)), a, b))
         else:  # NaN or infinite on one side only: a change of kind, not of round-off
             exact.append(f"{path} ({a!r} vs {b!r})")
     elif recorded != rerun:
@@ -98,16 +100,17 @@ def main(argv=None) -> int:
         row = run_case(case, seed, {e: strengths[f"{e}@{case.snr:g}"] for e in case.effects})
         row = json.loads(json.dumps(row, default=float))  # as the run wrote it
         exact, numeric = differences(recorded[key], row)
-        worst = max((d for _, d in numeric), default=0.0)
+        worst = sorted(numeric, key=lambda t: -t[1])[:3]
         summary[key] = {
             "same_verdicts_and_names": not exact,
             "numeric_differences": len(numeric),
-            "max_relative": worst,
+            "max_relative": worst[0][1] if worst else 0.0,
         }
+        shown = "; ".join(f"{p} {a:.3g} vs {b:.3g}" for p, _, a, b in worst) or "-"
         print(
             f"{key}: outcome {row['outcome']} (recorded {recorded[key]['outcome']}); non-numeric differences: "
-            f"{exact[:5] or 'none'}; {len(numeric)} numbers differ, at most {worst:.2g} relative "
-            f"({max(numeric, key=lambda t: t[1])[0] if numeric else '-'}); {row['seconds']:.0f} s",
+            f"{exact[:5] or 'none'}; {len(numeric)} numbers differ, the most (relative) {shown}; "
+            f"{row['seconds']:.0f} s",
             flush=True,
         )
     print(json.dumps(summary))
