@@ -7,19 +7,13 @@ physics effect is a false positive). ``--seeds`` seeds per case, starting at ``-
 20002, the tuning seeds). The label never reaches ``discover``.
 
 **Seeds.** A final run uses seeds no earlier run used, so the workflow is never judged on the data it was
-tuned on. The tests use 100-199; every other seed below 12000 is spent (the runs behind them are in the git history of
-``experiments/``, e.g. ``git log --stat -- experiments/``). The committed final runs of the current workflow
-are ``discrepancy-10000/`` (seeds 10000-10021, SNR 2, the defaults) and ``discrepancy-11000/`` (seeds
-11000-11021, ``--snr 4``, the eight effects only), each with its ``PREREGISTRATION.md``. The second version of
-discovery (relaxation's own signature, the series viscoelastic effect) was tuned on seeds 20000-20001. Its
-first pre-registered final run (seeds 12000-12039) was stopped after 31 rows (seeds 12000-12001), before any
-table. The reason then given, that a47a391 changes discovery's inputs, was wrong (discovery bins by fixed counts
-and never snaps repeats); but a review then found the new effect's scored test out of the registry's order and
-two edge cases of the relaxation signatures, which 888d48b fixes, so the run stays withdrawn and those seeds
-are spent. A second (seeds 13000-13039) was stopped after 7 rows when the strength gate was found to pass any
-rigid-off spring (23c3e67); withdrawn too. The final run of this version is pre-registered in
-``discrepancy-14000/`` (seeds 14000-14039); a later workflow change's final run starts at ``--first-seed
-15000``; tuning seeds from 20002.
+tuned on. The tests use 100-199; every other seed below 15000, and 20000-20001, is spent (the runs behind them
+are in the git history of ``experiments/``, e.g. ``git log --stat -- experiments/``). The committed final run of
+the current workflow is ``discrepancy-14000/`` (seeds 14000-14039, SNR 2, every case; code 1d9ce14), with its
+``PREREGISTRATION.md``; the final runs of the version before (``discrepancy-10000/``, SNR 2, and
+``discrepancy-11000/``, SNR 4) are at ``72e5f45:experiments/``, and two final runs of this version (seeds
+12000-12039 and 13000-13039) were stopped before any table and withdrawn (that file says why). A later workflow
+change's final run starts at ``--first-seed 15000``; tuning seeds from 20002.
 
 Runs are work units of ``peano_bayes.fanout`` (``--jobs`` local processes, or a Dask cluster with
 ``--scheduler``). Resumable: this process appends every finished run as one line of ``OUT/runs.jsonl``; a rerun
