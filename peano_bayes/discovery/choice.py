@@ -8,9 +8,9 @@ writes its report, and returns a :class:`ModelChoice`: the configuration to samp
 
 Discovery only adds: an effect of the configured model is never removed, because on one specimen's tests a
 missing effect can hide behind another (``ABSORBS``, ``CONFUSABLE``) and discovery misses some generating
-elements on the bundled files (docs/validation.md, *Discovery on the bundled muscles*). A named physics effect with no element in
-the inference model (``cyclic_softening``) is recorded as named but not sampled; the noise-side effects a report
-lists under ``noise_model`` are left out (the likelihood's noise model is fixed).
+elements on the bundled files (docs/validation.md, *Discovery on the bundled muscles*). A named physics effect
+with no element in the inference model (``cyclic_softening``) is recorded as named but not sampled; the
+noise-side effects a report lists under ``noise_model`` are left out (the likelihood's noise model is fixed).
 """
 
 from __future__ import annotations
