@@ -11,7 +11,8 @@ from pathlib import Path
 #: Every rig test a fit can use, in the data format's order.
 ALL_TESTS = ("load_cycle", "blocking", "stroke", "step")
 #: Tests fitted by default. The step response, sampled at 1 kHz and simulated through the inlet restriction,
-#: costs about 20 times the three quasi-static tests together per evaluation, so it is opt-in.
+#: costs about five times the three quasi-static tests together per evaluation (docs/validation.md, step-test
+#: solve), so it is opt-in.
 DEFAULT_TESTS = ("load_cycle", "blocking", "stroke")
 #: Sampler steps after which a chain that has not met the convergence gates stops, marked unconverged.
 DEFAULT_MAX_STEPS = 40_000
