@@ -15,6 +15,7 @@ from peano_bayes.validation.discovery_benchmark import run_key
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "experiments"))
 import discrepancy_benchmark as bench  # noqa: E402
+import discrepancy_gate_failures as gf  # noqa: E402
 import discrepancy_rerun as rerun  # noqa: E402
 import discrepancy_truth_bound as tb  # noqa: E402
 
@@ -95,3 +96,66 @@ def test_a_rerun_of_an_unknown_key_is_refused_with_exit_2(tmp_path, capsys):
         rerun.main(["--run", str(tmp_path), "--keys", "hysteresis|2|0.2|0|2"])
     assert stop.value.code == 2
     assert "no row with key 'hysteresis|2|0.2|0|2'" in capsys.readouterr().err
+
+
+def _candidate(signature, failed=(), **evidence):
+    gates = {g: g not in failed for g in ("predictive_gain", "parsimony", "own_signature", "identified")}
+    return {"signature": signature, "gates": gates, "delta_elpd": 50.0, "elpd_se": 20.0, "delta_bic": -100.0,
+            "signature_before": 4.0, "signature_ratio": 0.9, **evidence}  # fmt: skip
+
+
+def _diagnosis(**p):
+    return {"signatures": {name: {"p": v, "p_holm": min(1.0, 5 * v)} for name, v in p.items()}}
+
+
+def test_gate_failures_count_single_gates_by_truth_and_list_a_hidden_effects_misses(tmp_path):
+    """Hand-built rows: the counts, the visibility rule's release at each level and the misses are what the
+    rows say, and the table keeps a row key's separators out of its cells."""
+    rows = [
+        {  # relaxation hidden, missed: refitted twice, stopped by its own signature (p 0.04, then 0.3)
+            "key": "viscoelastic_relaxation|2|0.2|0|1", "effects": ["viscoelastic_relaxation"], "named": [],
+            "verdict": "none",
+            "screened": [
+                {"viscoelastic_relaxation": _candidate("relaxation", ["own_signature"]),
+                 "sensor_gain": _candidate("force_level", ["parsimony"])},
+                {"viscoelastic_relaxation": _candidate("relaxation", ["own_signature"])},
+            ],
+            "diagnoses": [_diagnosis(relaxation=0.04, force_level=0.5), _diagnosis(relaxation=0.3)],
+        },
+        {  # relaxation hidden and named: not a miss
+            "key": "viscoelastic_relaxation|2|0.2|0|2", "effects": ["viscoelastic_relaxation"],
+            "named": ["viscoelastic_relaxation"], "verdict": "named",
+            "screened": [{"viscoelastic_relaxation": _candidate("relaxation")}],
+            "diagnoses": [_diagnosis(relaxation=0.001)],
+        },
+        {  # nothing hidden: a false candidate stopped by its own signature (p 0.002), one failing two gates
+            "key": "none|0|0.2|0|3", "effects": [], "named": [], "verdict": "none",
+            "screened": [{"series_viscoelastic": _candidate("relaxation_at_load", ["own_signature"]),
+                          "hysteresis": _candidate("loading_split", ["own_signature", "parsimony"])}],
+            "diagnoses": [_diagnosis(relaxation_at_load=0.002, loading_split=0.9)],
+        },
+    ]  # fmt: skip
+    counts = gf.single_gate_failures(rows)
+    assert counts == {("own_signature", True): 2, ("parsimony", False): 1, ("own_signature", False): 1}
+    release = gf.visibility_release(rows, [0.01, 0.05])
+    assert release[0.01] == {"true_released": 2, "true_total": 2, "false_released": 0, "false_total": 1}
+    assert release[0.05] == {"true_released": 1, "true_total": 2, "false_released": 0, "false_total": 1}
+    missed = gf.misses(rows, "viscoelastic_relaxation")
+    assert [m["key"] for m in missed] == ["viscoelastic_relaxation|2|0.2|0|1"]
+    assert [(r["round"], r["signature_p"], r["failed"]) for r in missed[0]["rounds"]] == [
+        (0, 0.04, ["own_signature"]),
+        (1, 0.3, ["own_signature"]),
+    ]
+    table = gf.markdown(counts, release, missed, "viscoelastic_relaxation", tmp_path)
+    line = next(x for x in table.splitlines() if x.startswith("| viscoelastic_relaxation"))
+    assert line.replace("\\|", "").count("|") == 10  # nine cells: the key's own bars are escaped
+
+
+def test_gate_failures_refuses_a_folder_without_rows_or_without_the_effect(tmp_path, capsys):
+    with pytest.raises(SystemExit) as err:
+        gf.main([str(tmp_path)])
+    assert err.value.code == 2 and "not a benchmark run's folder" in capsys.readouterr().err
+    (tmp_path / "runs.jsonl").write_text(json.dumps({"key": "none|0|0.2|0|1", "effects": [], "screened": []}) + "\n")
+    with pytest.raises(SystemExit) as err:
+        gf.main([str(tmp_path), "--effect", "hysteresis"])
+    assert err.value.code == 2 and "no row" in capsys.readouterr().err
