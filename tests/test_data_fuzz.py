@@ -184,7 +184,11 @@ def test_corrupted_bytes_load_or_raise_data_format_error(workdir, which, edits):
 
 
 def test_missing_files_are_data_format_errors(workdir):
-    _check(workdir, BASE_CSV, None)
+    (workdir / "d.csv").write_text(BASE_CSV, encoding="utf-8", newline="")
+    (workdir / "d.toml").unlink(missing_ok=True)
+    with pytest.raises(DataFormatError, match="missing sidecar") as err:
+        load(workdir / "d.csv")
+    assert Path(err.value.file).name == "d.toml"
     with pytest.raises(DataFormatError, match="file not found"):
         load(workdir / "nothing_here.csv")
     (workdir / "dir.csv").mkdir()

@@ -1,5 +1,6 @@
 """The virtual rig: protocol, seeding, quirks, specimens, the file round trip and ``peano-bayes simulate``."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -118,14 +119,18 @@ def test_repeats_differ_by_noise_only():
 
 
 def test_drift_grows_through_the_session():
-    kwargs = dict(seed=3, specimens=1, repeats=2, tests=["blocking"], noise=QUIET)
-    plain = simulate_dataset("FC", **kwargs)
-    drifted = simulate_dataset("FC", drift=True, **kwargs)
-    rate = QUIET.force_drift_n_per_s
+    """With every other noise off, the drifted force minus the plain one is the drift rate times the time since
+    the session began: each run's own time plus the durations of the runs before it (runs start at 0 s)."""
+    rate = 0.002
+    kwargs = dict(seed=3, specimens=1, repeats=2, tests=["blocking"])
+    plain = simulate_dataset("FC", noise=QUIET, **kwargs)
+    drifted = simulate_dataset("FC", drift=True, noise=dataclasses.replace(QUIET, force_drift_n_per_s=rate), **kwargs)
     offset_s = 0.0
     for p, d in zip(plain.runs, drifted.runs, strict=True):
-        np.testing.assert_allclose(d.force_n - p.force_n, rate * (offset_s + p.time_s), atol=1e-9)
+        assert p.time_s[0] == 0.0
+        np.testing.assert_allclose(d.force_n - p.force_n, rate * (offset_s + p.time_s), rtol=1e-12, atol=1e-9)
         offset_s += p.duration_s
+    assert rate * offset_s > 0.05  # the drift over the session is large enough to be seen above atol
     assert drifted.provenance["drift"] == "true"
 
 
