@@ -6,7 +6,9 @@ no traceback, nothing half-written); 3 a fit or run finished but did not converg
 and marked unconverged); 130 interrupted (Ctrl-C).
 
 ``--json`` makes standard output carry only one JSON object (standard JSON: a value that is not finite is
-``null``); everything else (messages, progress) goes to standard error. ``--quiet`` keeps only warnings and
+``null``): the command's result, or, when it stops with status 1, 2 or 130, ``{"error": message,
+"exit_status": N}``; everything else (messages, progress) goes to standard error. (A command line that
+argparse itself cannot parse exits 2 with its usage message only.) ``--quiet`` keeps only warnings and
 errors; ``--verbose`` adds tracebacks of failed computations. ``--help`` and ``--version`` do not import JAX.
 The compiled programs are cached on disk (``$PEANO_BAYES_CACHE``, default ``~/.cache/peano_bayes/jax``), so a
 second run skips most compilation.
@@ -113,32 +115,36 @@ def _main(argv: list[str] | None) -> int:
     # Human output goes to stdout, or to stderr under --json (stdout then holds the JSON object alone), or
     # nowhere under --quiet; warnings and errors always go to stderr.
     human = open(os.devnull, "w") if args.quiet else (sys.stderr if args.json else sys.stdout)  # noqa: SIM115
+
+    def stop(status: int, word: str, message: str) -> int:
+        """Say why the command stopped (stderr) and, under ``--json``, as the one object on stdout too."""
+        print(f"{say}: {word}{': ' if message else ''}{message}", file=sys.stderr)
+        if args.json:
+            print(json.dumps({"error": f"{word}: {message}" if message else word, "exit_status": status}))
+        return status
+
     try:
         with contextlib.redirect_stdout(human):
             result = command.run(args)
     except PeanoBayesInputError as err:
-        print(f"{say}: error: {err}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+        return stop(EXIT_BAD_INPUT, "error", str(err))
     except BrokenPipeError:
         raise
     except OSError as err:  # a file or folder cannot be read or written as asked (a path the user gave)
         if args.verbose:
             traceback.print_exc()
         if err.filename is None:  # not a path (a lost connection, too many open files): the work failed
-            print(f"{say}: failed: {err}", file=sys.stderr)
-            return EXIT_FAILED
+            return stop(EXIT_FAILED, "failed", str(err))
         expected = "a folder or a new path" if isinstance(err, (FileExistsError, NotADirectoryError)) else "a path"
-        message = f"{err.filename}: {err.strerror or err}; expected {expected} it can read or write"
-        print(f"{say}: error: {message}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+        return stop(
+            EXIT_BAD_INPUT, "error", f"{err.filename}: {err.strerror or err}; expected {expected} it can read or write"
+        )
     except PeanoBayesError as err:  # not the user's input: a failure of the computation
         if args.verbose:
             traceback.print_exc()
-        print(f"{say}: failed: {err}", file=sys.stderr)
-        return EXIT_FAILED
+        return stop(EXIT_FAILED, "failed", str(err))
     except KeyboardInterrupt:
-        print(f"{say}: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        return stop(EXIT_INTERRUPTED, "interrupted", "")
     finally:
         if human not in (sys.stdout, sys.stderr):
             human.close()

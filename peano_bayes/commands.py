@@ -410,8 +410,9 @@ def _fit_arguments(p):
     p.add_argument(
         "--label", metavar="NAME", default=None, help="name of the result folder (default: the data file's stem)"
     )
-    p.add_argument("--resume", action="store_true", help="continue an interrupted run from its saved state")
-    p.add_argument("--force", action="store_true", help="fit again over a finished result in the same folder")
+    again = p.add_mutually_exclusive_group()  # continue the saved run, or start over: not both
+    again.add_argument("--resume", action="store_true", help="continue an interrupted run from its saved state")
+    again.add_argument("--force", action="store_true", help="fit again over a finished result in the same folder")
     p.add_argument("--no-figures", action="store_true", help="skip the figures (predictive band, corner plot)")
     _sampling_arguments(p)
 
@@ -427,6 +428,9 @@ def run(args):
     unknown = [m for m in materials if m not in bundled.MATERIALS]
     if unknown:
         raise PeanoBayesInputError(f"unknown material(s) {', '.join(unknown)}; bundled: {' '.join(bundled.MATERIALS)}")
+    repeated = sorted({m for m in materials if materials.count(m) > 1})
+    if repeated:
+        raise PeanoBayesInputError(f"--materials: {', '.join(repeated)} given more than once; expected each code once")
     from .pipeline import run_bundled
 
     summaries = run_bundled(args.out, materials=materials, **fanout, **options)
@@ -512,8 +516,8 @@ def prior_command(args):
     from .inference.priors import load_prior, starting_prior
 
     out = Path(args.out)
-    if out.suffix != ".toml":
-        raise PeanoBayesInputError(f"--out {out}: expected a path ending in .toml")
+    if out.suffix != ".toml" or not out.stem or out.stem.startswith("."):
+        raise PeanoBayesInputError(f"--out {out}: expected a file name ending in .toml, such as my_prior.toml")
     if out.is_dir():
         raise PeanoBayesInputError(f"--out {out}: a folder; expected the path of a prior file to write")
     if out.exists() and not args.force:

@@ -47,6 +47,8 @@ from .errors import PeanoBayesInputError
 
 #: Seconds between refreshes of the progress bar's running count while no unit finishes.
 POLL_S = 10.0
+#: The address schemes of Dask's communication layer (``distributed.comm``): a scheduler address uses one.
+DASK_SCHEMES = ("tcp", "tls", "inproc", "ucx", "ws", "wss")
 #: Environment variable that names the scheduler when no ``--scheduler`` is given.
 SCHEDULER_ENV = "PEANO_BAYES_SCHEDULER"
 #: XLA flags of a Dask worker process: one compute thread, so a node's N workers use N cores.
@@ -286,8 +288,8 @@ def cap_threads() -> None:
 
 def parse_scheduler(spec: str | None) -> tuple[str, int | str | None]:
     """``(kind, detail)`` of a scheduler specification: ``("processes", None)`` for none (local processes, or
-    serial with one job), ``("local", N)`` for ``local:N``, ``("address", URL)`` for ``tcp://HOST:PORT`` (any
-    ``scheme://``). Anything else is an input error naming the accepted forms."""
+    serial with one job), ``("local", N)`` for ``local:N``, ``("address", URL)`` for ``tcp://HOST:PORT`` (a scheme of
+    :data:`DASK_SCHEMES`). Anything else is an input error naming the accepted forms."""
     if spec is None or not spec.strip():
         return "processes", None
     spec = spec.strip()
@@ -297,11 +299,13 @@ def parse_scheduler(spec: str | None) -> tuple[str, int | str | None]:
         if n < 1:
             raise PeanoBayesInputError(f"scheduler {spec!r}: a LocalCluster needs at least 1 worker")
         return "local", n
-    if re.fullmatch(r"[a-z][a-z0-9+.-]*://\S+", spec):
+    m = re.fullmatch(r"([a-z][a-z0-9+.-]*)://\S+", spec)
+    if m and m.group(1) in DASK_SCHEMES:
         return "address", spec
     raise PeanoBayesInputError(
         f"scheduler {spec!r} is not understood; expected 'local:N' (a Dask LocalCluster of N workers) or a Dask "
-        f"scheduler address such as 'tcp://HOST:8786' (from --scheduler or ${SCHEDULER_ENV})"
+        f"scheduler address such as 'tcp://HOST:8786' (schemes: {', '.join(DASK_SCHEMES)}; from --scheduler or "
+        f"${SCHEDULER_ENV})"
     )
 
 

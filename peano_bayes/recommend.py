@@ -495,7 +495,11 @@ def recommend(
     root = Path(results_dir) if results_dir is not None else spec.results_dir
     codes = spec.materials or tuple(sorted(p.parent.name for p in root.glob("*/posterior.nc")))
     if not codes:
-        raise PeanoBayesInputError(f"{root}: no material results (*/posterior.nc); run 'peano-bayes run' first")
+        where = "no such folder" if not root.is_dir() else "no material results (*/posterior.nc) in it"
+        origin = "the spec's [results] dir" if results_dir is None else "the results folder"
+        raise PeanoBayesInputError(
+            f"{root} ({origin}): {where}; expected a folder that 'peano-bayes run' (or fit) wrote"
+        )
     materials, misfits = {}, {}
     for code in codes:
         directory = root / code

@@ -137,8 +137,8 @@ def test_exit_status_of_each_outcome(own_muscle, tmp_path, capsys, monkeypatch, 
     if status in (0, 3):
         report = json.loads(captured.out)
         assert report["converged"] is (status == 0) and report["label"] == "VM_first"
-    else:
-        assert captured.out == ""
+    else:  # the one JSON object says why it stopped
+        assert json.loads(captured.out) == {"error": captured.err.strip().split(": ", 1)[1], "exit_status": status}
         assert "Traceback" not in captured.err
 
 
@@ -337,3 +337,20 @@ def test_the_main_job_runs_discovery_first_unless_told_not_to(tmp_path, monkeypa
     assert main(["fit-many", data, "--out", out]) == 0
     assert main(["fit-many", data, "--out", out, "--discover"]) == 0
     assert seen == [("run", True), ("run", False), ("run", True), ("many", False), ("many", True)]
+
+
+def test_bad_invocations_are_refused_up_front_with_what_was_expected(tmp_path, capsys, monkeypatch):
+    """A mistyped material code, a code given twice, --resume with --force: exit 2, a message that names the
+    input and what was expected, under --json also as the one object on stdout, and nothing written."""
+    monkeypatch.chdir(tmp_path)
+    assert main(["check", "XX", "--json"]) == 2
+    captured = capsys.readouterr()
+    assert "XX: neither a bundled material code nor a dataset file" in captured.err and "TP P PR" in captured.err
+    assert json.loads(captured.out)["exit_status"] == 2
+    out = tmp_path / "r"
+    assert main(["run", "--out", str(out), "--materials", "P", "p"]) == 2  # codes are case-blind
+    assert "--materials: P given more than once" in capsys.readouterr().err and not out.exists()
+    with pytest.raises(SystemExit) as stop:
+        main(["fit", "TP", "--out", str(out), "--resume", "--force"])
+    assert stop.value.code == 2 and "not allowed with argument" in capsys.readouterr().err
+    assert not out.exists()

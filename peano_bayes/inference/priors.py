@@ -137,7 +137,6 @@ def _as_array(x, ops):
     return jnp.asarray(x, dtype=jnp.float64) if ops is _JaxOps else np.asarray(x, dtype=np.float64)
 
 
-
 # ----------------------------------------------------------------------------------------------- marginals
 
 
@@ -248,9 +247,7 @@ class Marginal:
         log_jac_logistic = xp.log_sigmoid(u) + xp.log_sigmoid(-u)
         if kind == "loglogit":
             span = math.log(self.high / self.low)
-            y = xp.where(
-                u < 0, math.log(self.low) + span * xp.sigmoid(u), math.log(self.high) - span * xp.sigmoid(-u)
-            )
+            y = xp.where(u < 0, math.log(self.low) + span * xp.sigmoid(u), math.log(self.high) - span * xp.sigmoid(-u))
             return xp.exp(y), y + math.log(span) + log_jac_logistic
         if kind == "logit":
             span = self.high - self.low
@@ -491,7 +488,9 @@ def _resolve_start(code_or_path: str | Path, directory: Path) -> Path:
     as_path = Path(code_or_path)
     if as_path.suffix == ".toml" or as_path.is_file():
         if not as_path.is_file():
-            raise PeanoBayesInputError(f"{as_path}: prior file not found")
+            raise PeanoBayesInputError(
+                f"{as_path}: prior file not found; expected an existing .toml prior file or a material code"
+            )
         return as_path
     code = str(code_or_path).strip()
     code = code.upper() if code.upper() in MATERIALS else code
@@ -521,7 +520,9 @@ def _read(path: Path) -> tuple[str, dict]:
     try:
         return raw, tomllib.loads(raw)
     except tomllib.TOMLDecodeError as err:
-        raise _fail(path, f"not valid TOML ({err})") from None
+        raise _fail(
+            path, f"not valid TOML ({err}); expected a TOML prior file such as 'peano-bayes prior new' writes"
+        ) from None
 
 
 def _read_chain(start: Path, directory: Path) -> list[tuple[Path, str, dict]]:
