@@ -61,7 +61,8 @@ def test_scheduler_specifications():
     assert parse_scheduler(None) == ("processes", None) == parse_scheduler("  ")
     assert parse_scheduler("local:3") == ("local", 3)
     assert parse_scheduler("tcp://10.0.0.2:8786") == ("address", "tcp://10.0.0.2:8786")
-    for bad in ("local:0", "local", "10.0.0.2:8786", "dask"):
+    assert parse_scheduler("tls://head:8786") == ("address", "tls://head:8786")
+    for bad in ("local:0", "local", "10.0.0.2:8786", "dask", "bogus://x", "http://head:8787"):
         with pytest.raises(PeanoBayesInputError, match="local:N|at least 1 worker"):
             parse_scheduler(bad)
     with pytest.raises(PeanoBayesInputError, match="jobs must be >= 1"):

@@ -1,7 +1,8 @@
 """Reproductions and differentiability of the paper's two reference models (physics/reference.py).
 
 Targets come from Veale, Xie, Anderson (2016) (Tables 1-2, section 2) and from consequences of the two models
-worked out by hand (Veale's force balance; Sarosi's static curves and their linearisation). Tabulated values
+derived in the project's design notes before this code was written (Veale's force balance and its roots;
+Sarosi's static curves, their linearisation and the step response), not from running it. Tabulated values
 are checked to their printed precision: within 0.6 units of the last printed digit (half a unit for rounding
 plus a little slack, because a few tabulated entries sit right on a rounding boundary).
 
