@@ -264,13 +264,17 @@ def _linearisation_point(path: Path, state_path: Path, posterior) -> tuple[np.nd
     return np.asarray(stored["theta"], dtype=float), dict(stored.get("residual_lag1", {}))
 
 
+#: Where in a result folder ``fit --discover`` and ``run`` write the discovery report.
+DISCOVERY_FOLDER = "discovery"
+
+
 def _model_choice(dataset: Dataset, config, out: Path, *, discover: bool, resume: bool, seed: int, log, centre=None):
     """The model a fit samples: ``config``, or with ``discover`` ``config`` plus what discovery names on the
     data (its report in ``out/discovery``; its base fit also starts around ``centre``, name -> value [SI], the
     prior's medians). On ``resume`` the model of the saved fit: the report's if there is one, else ``config``."""
     from .discovery.choice import choice_from_report, choose_model, configured_model, effects_in
 
-    folder = out / "discovery"
+    folder = out / DISCOVERY_FOLDER
     # A resumed fit keeps the model its saved least squares and sampler state belong to, whatever the flag says.
     read_back = resume and (folder / "report.json").exists()
     resumed_without = resume and not read_back and (out / "fit.json").exists()
@@ -510,7 +514,8 @@ def infer(
         "dataset": str(dataset.source_path),
         "prior": str(prior.label),
         "tests": list(dataset.tests),
-        "model": choice.as_dict(),
+        # the report's folder relative to the result folder, so a result moved or published keeps its reference
+        "model": dataclasses.replace(choice, report=None if choice.report is None else DISCOVERY_FOLDER).as_dict(),
         "seed": seed,
         "n_walkers": n_walkers,
         "warmup": result.warmup,
@@ -628,9 +633,12 @@ def model_table(summaries: list[dict]) -> list[str]:
             f"{', '.join(found['adopted']) or 'nothing'} | {', '.join(found['not_in_model'])} |"
         )
         if found["unexplained"]:
+            report = Path(found["report"] or "discovery")
+            if not report.is_absolute():  # relative to the result folder, which index.md names by its label
+                report = Path(s.get("label", s["material"])) / report
             notes.append(
                 f"**{s['material']}**: discovery left structure it could not name; see its report "
-                f"(`{found['report']}/report.md`). The sampled model does not explain all of the data."
+                f"(`{report.as_posix()}/report.md`). The sampled model does not explain all of the data."
             )
     return [*lines, "", *(f"{n}\n" for n in notes)]
 

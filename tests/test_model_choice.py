@@ -96,18 +96,18 @@ def test_index_shows_the_sampled_model_beside_what_discovery_named():
     from peano_bayes.pipeline import model_table
 
     report = {"verdict": "named", "named": ["series_compliance"], "described": [], "structure_left": True}
-    found = choice_from_report(BARE, report, "r/PC/discovery")
+    found = choice_from_report(BARE, report, "discovery")  # as a fit records it: relative to its result folder
     text = "\n".join(
         model_table(
             [
-                {"material": "PC", "model": found.as_dict()},
+                {"material": "PC", "label": "PC_run2", "model": found.as_dict()},
                 {"material": "TP", "model": configured_model(BARE).as_dict()},
             ]
         )
     )
     assert "| PC | series_compliance, flow_restriction | named | series_compliance | series_compliance |" in text
     assert "| TP | flow_restriction | not run (the configured model) |" in text
-    assert "**PC**: discovery left structure it could not name" in text and "r/PC/discovery/report.md" in text
+    assert "**PC**: discovery left structure it could not name" in text and "(`PC_run2/discovery/report.md`)" in text
 
 
 def test_a_resumed_fit_reads_the_discovery_report_instead_of_running_discovery(tmp_path, monkeypatch):

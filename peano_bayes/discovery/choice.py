@@ -73,7 +73,7 @@ class ModelChoice:
     inference model has no element for; ``verdict`` discovery's verdict (``None`` without discovery);
     ``unexplained`` whether discovery ended with structure it could not name (its verdict, a flexible term it
     needed, or significant residual structure left after the last effect); ``report`` the discovery
-    report's folder.
+    report's folder (a fit's ``summary.json`` records it relative to the result folder: ``discovery``).
     """
 
     config: ModelConfig
