@@ -47,12 +47,12 @@ def resolve_dataset(name: str | Path) -> Path:
     code; so the command line takes ``TP`` as well as ``path/to/TP.csv``."""
     path = Path(name)
     code = str(name).upper()  # material codes are case-blind, as ``prior new --like`` and ``run --materials``
-    if code not in MATERIALS or path.is_file() or path.with_name(path.name + ".csv").is_file():
-        if code not in MATERIALS and len(path.parts) == 1 and not path.suffix and not path.exists():
-            if not path.with_name(path.name + ".csv").exists():  # a bare word: a mistyped code or a missing stem
-                raise PeanoBayesInputError(
-                    f"{name}: neither a bundled material code nor a dataset file ({name}.csv not found); expected "
-                    f"one of {' '.join(MATERIALS)} or the path of a rig CSV with its TOML sidecar"
-                )
-        return path
-    return dataset_path(code)
+    if code in MATERIALS and not (path.is_file() or path.with_name(path.name + ".csv").is_file()):
+        return dataset_path(code)
+    bare_word = len(path.parts) == 1 and not path.suffix
+    if code not in MATERIALS and bare_word and not (path.exists() or path.with_name(path.name + ".csv").exists()):
+        raise PeanoBayesInputError(
+            f"{name}: neither a bundled material code nor a dataset file ({name}.csv not found); expected "
+            f"one of {' '.join(MATERIALS)} or the path of a rig CSV with its TOML sidecar"
+        )
+    return path
