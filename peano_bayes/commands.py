@@ -68,9 +68,21 @@ def _writable_folder(path, option: str) -> Path:
     parent = path
     while not parent.exists():
         parent = parent.parent
-    if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
+    if not parent.is_dir() or not _can_create_in(parent):
         raise PeanoBayesInputError(f"{option} {path}: {parent} is not a folder this user can write into")
     return path
+
+
+def _can_create_in(folder: Path) -> bool:
+    """Whether a file can be created in ``folder``, by creating (and at once removing) one: ``os.access`` answers
+    from permission bits, which say yes to root everywhere, also under ``/proc`` or on a read-only mount."""
+    import tempfile
+
+    try:
+        with tempfile.TemporaryFile(dir=folder):
+            return True
+    except OSError:
+        return False
 
 
 def _seed(text: str) -> int:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -354,3 +355,12 @@ def test_bad_invocations_are_refused_up_front_with_what_was_expected(tmp_path, c
         main(["fit", "TP", "--out", str(out), "--resume", "--force"])
     assert stop.value.code == 2 and "not allowed with argument" in capsys.readouterr().err
     assert not out.exists()
+
+
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs a /proc file system, where no file can be made")
+def test_an_out_folder_where_nothing_can_be_created_is_refused_before_the_work(capsys):
+    """Permission bits say yes to root everywhere; the check creates a file to be sure, so a folder under /proc
+    is refused (exit 2) before the rig simulates anything."""
+    assert main(["simulate", "--material", "TP", "--out", "/proc/peano_bayes_out/TP.csv"]) == 2
+    captured = capsys.readouterr()
+    assert "/proc is not a folder this user can write into" in captured.err and "simulated" not in captured.out
