@@ -14,6 +14,13 @@ of the candidates that failed only that gate had a signature whose own p-value (
 was at least the level, i.e. would have passed had "visible" meant "significant at that level". A post-hoc
 reading of a final run: it shows where a gate binds, and changes nothing in the recorded result.
 
+And whether ``--effect``'s own signature could see it at all: per case, the distribution of that signature's
+statistic in the first diagnosis (the base refitted, before any candidate), so the case that hides the effect can
+be set beside the cases that do not; and, over the rows that hide the effect alone, the detections against
+whether that first statistic was visible (``T >= min_signature``). A signature without power has the same
+distribution with the effect hidden as without, and then a detection says only that the noise kept ``T`` below
+the visibility threshold, where the gate is not checked.
+
     python experiments/discrepancy_gate_failures.py experiments/discrepancy-14000 --effect viscoelastic_relaxation
 
 Writes ``RUN/checks/gate_failures/GATE_FAILURES.md``; last line one JSON object.
@@ -28,6 +35,8 @@ from collections import Counter
 from pathlib import Path
 
 from peano_bayes.atomic import write_text
+from peano_bayes.discovery.effects import LIBRARY
+from peano_bayes.discovery.workflow import Gates
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from discrepancy_benchmark import log_rows, run_logs  # noqa: E402
@@ -97,7 +106,43 @@ def misses(rows, effect: str) -> list[dict]:
     return out
 
 
-def markdown(counts: Counter, release: dict, missed: list[dict], effect: str, run: Path) -> str:
+def case_of(row) -> str:
+    """A row's case: its key without the seed (label, SNR, force noise sd, drift)."""
+    return row["key"].rsplit("|", 1)[0]
+
+
+def signature_power(rows, signature: str, min_signature: float) -> dict:
+    """Per case: ``n``, the median and root mean square of ``signature``'s statistic in the first diagnosis, how
+    many rows had it visible (``T >= min_signature``) and how many significant at 0.05 (unadjusted)."""
+    by_case: dict[str, list] = {}
+    for row in rows:
+        if row["diagnoses"]:
+            by_case.setdefault(case_of(row), []).append(row["diagnoses"][0]["signatures"][signature])
+    out = {}
+    for case, sigs in sorted(by_case.items()):
+        t = sorted(s["T"] for s in sigs)
+        mid = len(t) // 2
+        out[case] = {
+            "n": len(t),
+            "median_T": t[mid] if len(t) % 2 else 0.5 * (t[mid - 1] + t[mid]),
+            "rms_T": (sum(x * x for x in t) / len(t)) ** 0.5,
+            "visible": sum(x >= min_signature for x in t),
+            "p_below_0.05": sum(s["p"] < 0.05 for s in sigs),
+        }
+    return out
+
+
+def detection_by_visibility(rows, effect: str, signature: str, min_signature: float) -> Counter:
+    """Over the rows hiding ``effect`` alone: ``(visible in the first diagnosis, correct) -> count``."""
+    counts = Counter()
+    for row in rows:
+        if row["effects"] == [effect] and row["diagnoses"]:
+            visible = row["diagnoses"][0]["signatures"][signature]["T"] >= min_signature
+            counts[(bool(visible), bool(row["correct"]))] += 1
+    return counts
+
+
+def markdown(counts: Counter, release: dict, missed: list[dict], effect: str, run: Path, power=None) -> str:
     lines = [
         f"# Which gate stops a hidden effect: {run.name}",
         "",
@@ -125,6 +170,32 @@ def markdown(counts: Counter, release: dict, missed: list[dict], effect: str, ru
         lines.append(
             f"| {level:g} | {r['true_released']} of {r['true_total']} | {r['false_released']} of {r['false_total']} |"
         )
+    if power is not None:
+        signature, min_signature, by_case, detection = power
+        lines += [
+            "",
+            f"## Could `{signature}` see `{effect}`?",
+            "",
+            f"The statistic of `{signature}` in each row's first diagnosis (base refitted, no candidate yet), by case; "
+            f"visible: `T >= {min_signature:g}`, where the own-signature gate is checked.",
+            "",
+            "| case | rows | median T | RMS T | visible | p < 0.05 |",
+            "|---|---|---|---|---|---|",
+        ]
+        for case, c in by_case.items():
+            cell = case.replace("|", "\\|")
+            lines.append(
+                f"| {cell} | {c['n']} | {c['median_T']:.2f} | {c['rms_T']:.2f} | {c['visible']} | {c['p_below_0.05']} |"
+            )
+        lines += [
+            "",
+            f"Rows hiding `{effect}` alone, by whether `{signature}` was visible in the first diagnosis:",
+            "",
+            "| first diagnosis | correct | missed |",
+            "|---|---|---|",
+            f"| visible | {detection[(True, True)]} | {detection[(True, False)]} |",
+            f"| not visible | {detection[(False, True)]} | {detection[(False, False)]} |",
+        ]
     lines += [
         "",
         f"## `{effect}` hidden and not named alone: {len(missed)} rows",
@@ -160,9 +231,13 @@ def main(argv=None) -> int:
     counts = single_gate_failures(rows)
     release = visibility_release(rows, args.levels)
     missed = misses(rows, args.effect)
+    signature, min_signature = LIBRARY[args.effect].signature, Gates().min_signature
+    by_case = signature_power(rows, signature, min_signature)
+    detection = detection_by_visibility(rows, args.effect, signature, min_signature)
     out = args.run / "checks" / "gate_failures"
     out.mkdir(parents=True, exist_ok=True)
-    write_text(out / "GATE_FAILURES.md", markdown(counts, release, missed, args.effect, args.run))
+    power = (signature, min_signature, by_case, detection)
+    write_text(out / "GATE_FAILURES.md", markdown(counts, release, missed, args.effect, args.run, power))
     only_own = [m for m in missed if m["rounds"] and all(r["failed"] == ["own_signature"] for r in m["rounds"])]
     print(f"wrote {out / 'GATE_FAILURES.md'}", file=sys.stderr)
     print(
@@ -174,6 +249,12 @@ def main(argv=None) -> int:
                 "effect": args.effect,
                 "misses": len(missed),
                 "misses_failing_only_own_signature_in_every_round": len(only_own),
+                "signature": signature,
+                "signature_power": by_case,
+                "detection_by_visibility": {
+                    f"{'visible' if v else 'not_visible'}|{'correct' if c else 'missed'}": n
+                    for (v, c), n in sorted(detection.items())
+                },
             }
         )
     )

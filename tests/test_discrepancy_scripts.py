@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import sys
+from collections import Counter
 from pathlib import Path
 
 import pytest
@@ -159,3 +160,34 @@ def test_gate_failures_refuses_a_folder_without_rows_or_without_the_effect(tmp_p
     with pytest.raises(SystemExit) as err:
         gf.main([str(tmp_path), "--effect", "hysteresis"])
     assert err.value.code == 2 and "no row" in capsys.readouterr().err
+
+
+def test_signature_power_sets_the_hidden_case_beside_the_others_and_detection_against_visibility(tmp_path):
+    """Hand-built first diagnoses: per case the statistic's median, RMS, visible and significant counts are the
+    rows', and the detections of the hidden effect are split by whether its signature was visible."""
+
+    def row(label, seed, t, p, correct, effects):
+        sig = {"relaxation": {"T": t, "p": p, "p_holm": 1.0}}
+        return {"key": f"{label}|2|0.2|0|{seed}", "effects": effects, "correct": correct, "named": [],
+                "verdict": "none", "screened": [], "diagnoses": [{"signatures": sig}, {"signatures": {}}]}  # fmt: skip
+
+    relax = ["viscoelastic_relaxation"]
+    rows = [
+        row("viscoelastic_relaxation", 1, 1.0, 0.6, True, relax),
+        row("viscoelastic_relaxation", 2, 4.0, 0.01, False, relax),
+        row("viscoelastic_relaxation", 3, 2.0, 0.3, True, relax),
+        row("none", 4, 5.0, 0.04, False, []),
+        row("none", 5, 0.5, 0.9, True, []),
+    ]
+    power = gf.signature_power(rows, "relaxation", 3.0)
+    assert power["viscoelastic_relaxation|2|0.2|0"] == {
+        "n": 3, "median_T": 2.0, "rms_T": pytest.approx((21.0 / 3.0) ** 0.5, rel=1e-12), "visible": 1,
+        "p_below_0.05": 1,
+    }  # fmt: skip
+    assert power["none|2|0.2|0"]["median_T"] == pytest.approx(2.75, rel=1e-12)
+    assert power["none|2|0.2|0"]["visible"] == 1 and power["none|2|0.2|0"]["p_below_0.05"] == 1
+    detection = gf.detection_by_visibility(rows, "viscoelastic_relaxation", "relaxation", 3.0)
+    assert detection == {(False, True): 2, (True, False): 1}
+    table = gf.markdown(Counter(), {}, [], "viscoelastic_relaxation", tmp_path, ("relaxation", 3.0, power, detection))
+    assert "| visible | 0 | 1 |" in table and "| not visible | 2 | 0 |" in table
+    assert "| viscoelastic_relaxation\\|2\\|0.2\\|0 | 3 | 2.00 | 2.65 | 1 | 1 |" in table
