@@ -10,6 +10,8 @@ import sys
 from collections import Counter
 from pathlib import Path
 
+import numpy as np
+import pandas as pd
 import pytest
 
 from peano_bayes.validation.discovery_benchmark import run_key
@@ -191,3 +193,44 @@ def test_signature_power_sets_the_hidden_case_beside_the_others_and_detection_ag
     table = gf.markdown(Counter(), {}, [], "viscoelastic_relaxation", tmp_path, ("relaxation", 3.0, power, detection))
     assert "| visible | 0 | 1 |" in table and "| not visible | 2 | 0 |" in table
     assert "| viscoelastic_relaxation\\|2\\|0.2\\|0 | 3 | 2.00 | 2.65 | 1 | 1 |" in table
+
+
+def test_signature_power_statistic_table_and_refusals(tmp_path, capsys):
+    """The matched signatures' statistic is discovery's T with its block sign-flip p (at its floor for a signal
+    along w, NaN for an empty weight); the table and summary are the rows'; bad arguments exit 2."""
+    import signature_power as sp
+
+    from peano_bayes.discovery.diagnose import N_FLIPS, signature_statistic
+
+    rng = np.random.default_rng(5)
+    block = np.repeat(np.arange(30), 10)
+    w, noise = rng.normal(size=300), rng.normal(size=300)
+    t, p = sp.sign_flip_p(w, noise, block, seed=1)
+    assert t == pytest.approx(signature_statistic(noise, w), rel=1e-12) and 0.0 < p <= 1.0
+    t, p = sp.sign_flip_p(w, noise + 8.0 * w / np.linalg.norm(w), block, seed=1)
+    assert t > 7.0 and p == pytest.approx(1.0 / (N_FLIPS + 1), rel=1e-12)
+    assert all(np.isnan(sp.sign_flip_p(np.zeros(300), noise, block, seed=1)))
+
+    table = pd.DataFrame(
+        [{"key": f"{c}|{s}", "case": c, "seed": s, "signature": "matched:x", "T": t, "p": p, "share_load_cycle": 0.1,
+          "share_blocking": 0.0, "share_stroke": 0.3, "share_step": 0.6}
+         for c, s, t, p in [("x", 1, 6.0, 0.001), ("x", 2, 4.0, 0.2), ("none", 1, 1.0, 0.5), ("none", 2, 2.0, 0.01)]]
+    )  # fmt: skip
+    assert sp.summary(table)["matched:x"] == {
+        "none": {"rows": 2, "median_T": 1.5, "p_below": 0.5},
+        "x": {"rows": 2, "median_T": 5.0, "p_below": 0.5},
+    }
+    assert "| matched:x | 1.5 / 0.50 | 5.0 / 0.50 |" in sp.markdown(table)
+    assert "| matched:x | 0.10 | 0.00 | 0.30 | 0.60 |" in sp.markdown(table)
+
+    with pytest.raises(SystemExit) as stop:
+        sp.main(["--run", str(tmp_path), "--out", str(tmp_path / "o")])
+    assert stop.value.code == 2 and "strengths.json" in capsys.readouterr().err
+    (tmp_path / "strengths.json").write_text("{}")
+    with pytest.raises(SystemExit) as stop:
+        sp.main(["--run", str(tmp_path), "--out", str(tmp_path / "o"), "--cases", "no_such_case"])
+    assert stop.value.code == 2 and "unknown no_such_case" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as stop:
+        sp.main(["--run", str(tmp_path), "--out", str(tmp_path / "o"), "--cases", "hysteresis"])
+    assert stop.value.code == 2 and "no hysteresis@2" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
