@@ -80,12 +80,16 @@ def test_probability_heatmap_writes_every_finite_cell():
     plt.close(fig)
 
 
-def test_predictive_runs_of_a_result_bracket_their_median(result_dir):
+def test_predictive_band_of_a_result_holds_its_observed_bins(result_dir):
     runs = predictive_runs(load_result(result_dir))
     assert {r["test"] for r in runs} == {"load_cycle"}
     for r in runs:
         assert r["time_s"].shape == r["observed"].shape == r["median"].shape
-        assert np.all(r["low"] <= r["median"]) and np.all(r["median"] <= r["high"])
+        # the band is the predictive of the bin means (noise included), so it holds most of the observed bins: a
+        # 94 % band, read off a few draws and over correlated residuals, at least 80 % of them; a band of the
+        # parameters alone (no noise) or of another run's bins would hold far fewer
+        inside = (r["low"] <= r["observed"]) & (r["observed"] <= r["high"])
+        assert inside.mean() >= 0.8, inside.mean()
         # the data scatter around the predictive median at about the noise (0.2 N per raw sample)
         assert np.sqrt(np.mean((r["observed"] - r["median"]) ** 2)) < 0.5
 
@@ -187,7 +191,7 @@ def test_builders_of_nothing_give_nothing(builder):
 
 
 @pytest.mark.slow
-def test_step_band_brackets_its_median_and_draws_a_figure(result_dir, tmp_path):
+def test_step_band_spreads_with_the_prior_only_parameters_and_draws_a_figure(result_dir, tmp_path):
     from peano_bayes.figures import step_band
     from peano_bayes.rig import simulate_dataset
 
@@ -196,8 +200,9 @@ def test_step_band_brackets_its_median_and_draws_a_figure(result_dir, tmp_path):
     dataset = simulate_dataset("TP", recovery_truth(), seed=3, specimens=1, repeats=1, tests=("step",))
     band = step_band(load_result(result_dir), dataset, n_draws=6)
     assert band["n_draws"] == 6 and band["time_s"].shape == band["observed"].shape == band["median"].shape
-    assert np.all(band["low"] <= band["median"]) and np.all(band["median"] <= band["high"])
-    # The step-only parameters (inlet, damping) were not fitted: drawn from the prior, and said so.
+    # The step-only parameters (inlet, damping) were not fitted: drawn from the prior, and said so; their spread
+    # widens the band after the step.
+    assert np.max(band["high"] - band["low"]) > 1e-3
     assert "orifice_area_m2" in band["prior_only"]
     # The muscle contracts after the step, in the data and in the model.
     assert band["observed"][-20:].mean() > band["observed"][:5].mean() + 0.01
