@@ -257,6 +257,7 @@ def test_units_on_a_dask_cluster_survive_a_killed_worker_and_equal_a_serial_run(
     reference = json.loads((serial_out / "TP" / "reference_models.json").read_text())
     assert "| Sarosi static, 12 coefficients |" in index and "| Veale force balance |" in index
     assert all(0.0 < reference[m]["quality"]["rmse"] < 50.0 for m in ("sarosi", "veale"))
+    assert reference["veale"]["non_finite_bins"] == 0  # a non-finite bin would be scored as a force of 0 N
 
     # The replicate on the cluster equals the one in this process.
     rows = lambda outcomes: [{k: v for k, v in o.value.items() if k != "seconds"} for o in outcomes]  # noqa: E731
