@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import statistics
 import sys
 from collections import Counter
 from pathlib import Path
@@ -120,12 +121,11 @@ def signature_power(rows, signature: str, min_signature: float) -> dict:
             by_case.setdefault(case_of(row), []).append(row["diagnoses"][0]["signatures"][signature])
     out = {}
     for case, sigs in sorted(by_case.items()):
-        t = sorted(s["T"] for s in sigs)
-        mid = len(t) // 2
+        t = [s["T"] for s in sigs]
         out[case] = {
             "n": len(t),
-            "median_T": t[mid] if len(t) % 2 else 0.5 * (t[mid - 1] + t[mid]),
-            "rms_T": (sum(x * x for x in t) / len(t)) ** 0.5,
+            "median_T": statistics.median(t),
+            "rms_T": statistics.fmean(x * x for x in t) ** 0.5,
             "visible": sum(x >= min_signature for x in t),
             "p_below_0.05": sum(s["p"] < 0.05 for s in sigs),
         }

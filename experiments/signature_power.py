@@ -44,7 +44,7 @@ import pandas as pd
 from peano_bayes import enable_compilation_cache
 from peano_bayes.atomic import write_text
 from peano_bayes.discovery import discovery_data
-from peano_bayes.discovery.diagnose import N_FLIPS, diagnose
+from peano_bayes.discovery.diagnose import diagnose, sign_flip_p, sign_flips, signature_statistic
 from peano_bayes.discovery.effects import LIBRARY
 from peano_bayes.discovery.fitting import _jacobian, _pointwise, evaluate
 from peano_bayes.discovery.model import DEFAULT_BASE
@@ -68,33 +68,26 @@ LEVEL = 0.05
 TESTS = ("load_cycle", "blocking", "stroke", "step")
 
 
-def sign_flip_p(w: np.ndarray, r: np.ndarray, block: np.ndarray, seed: int) -> tuple[float, float]:
-    """``T = |w.r| / |w|`` and its block sign-flip p-value, as :func:`~peano_bayes.discovery.diagnose.diagnose`
-    computes a signature's (blocks of consecutive bins of one run)."""
-    norm = float(np.sqrt(np.sum(w**2)))
-    if not norm > 0 or not np.all(np.isfinite(w)):
+def signature_test(w: np.ndarray, r: np.ndarray, blocks: np.ndarray, flips: np.ndarray) -> tuple[float, float]:
+    """``T`` and its block sign-flip ``p``, as :func:`~peano_bayes.discovery.diagnose.diagnose` computes a
+    signature's; NaN for an empty or non-finite weight."""
+    if not (np.any(w) and np.all(np.isfinite(w))):
         return float("nan"), float("nan")
-    blocks = np.unique(block, return_inverse=True)[1]
-    sums = np.bincount(blocks, weights=w * r, minlength=int(blocks.max()) + 1)
-    flips = np.random.default_rng(seed).choice([-1.0, 1.0], size=(N_FLIPS, sums.size))
-    observed = abs(sums.sum())
-    return observed / norm, float((1 + np.sum(np.abs(flips @ sums) >= observed - 1e-12)) / (N_FLIPS + 1))
+    return signature_statistic(r, w), sign_flip_p(w, r, blocks, flips)
 
 
-def matched_weight(base, effect: str, split) -> np.ndarray:
-    """The effect's standardized prediction change (n,) from the base fit to the screen's start, with the base
+def matched_weights(base, effects, split) -> dict[str, np.ndarray]:
+    """Per effect, its standardized prediction change (n,) from the base fit to the screen's start, with the base
     fit's Jacobian columns (its free parameters, on the fitted bins) projected out."""
     r0 = np.asarray(_pointwise(jnp.asarray(base.x), split.fit).r)
-    r1 = np.asarray(_pointwise(jnp.asarray(_start(base, effect)), split.fit).r)
-    d = r0 - r1  # (predicted with - predicted without) / sd, 0 where unmeasured
-    jac = np.asarray(
-        _jacobian(jnp.asarray(base.u), jnp.asarray(base.spec.mask), jnp.asarray(base.spec.pinned), split.fit)[0]
-    )
-    j = jac[: d.size][:, base.spec.mask]
-    if not (np.all(np.isfinite(d)) and np.all(np.isfinite(j))):
-        return np.full(d.shape, np.nan)
-    coef, *_ = np.linalg.lstsq(j, d, rcond=1e-10)
-    return d - j @ coef
+    args = (jnp.asarray(base.u), jnp.asarray(base.spec.mask), jnp.asarray(base.spec.pinned), split.fit)
+    j = np.asarray(_jacobian(*args)[0])[: r0.size][:, base.spec.mask]
+    pinv = np.linalg.pinv(j, rcond=1e-10) if np.all(np.isfinite(j)) else None
+    out = {}
+    for effect in effects:
+        d = r0 - np.asarray(_pointwise(jnp.asarray(_start(base, effect)), split.fit).r)  # (with - without) / sd
+        out[effect] = d - j @ (pinv @ d) if pinv is not None and np.all(np.isfinite(d)) else np.full(d.shape, np.nan)
+    return out
 
 
 def row_statistics(case, seed: int, strengths: dict) -> list[dict]:
@@ -111,11 +104,10 @@ def row_statistics(case, seed: int, strengths: dict) -> list[dict]:
          "p": diag.p_value[name]}
         for name in diag.statistic
     ]  # fmt: skip
-    for effect in LIBRARY:
-        if LIBRARY[effect].kind != "physics" or effect in base.spec.active:
-            continue
-        w = matched_weight(base, effect, split)
-        t, p = sign_flip_p(w, fit_eval.r, cov.block, seed)
+    blocks, flips = sign_flips(cov.block, seed)
+    effects = [e for e in LIBRARY if LIBRARY[e].kind == "physics" and e not in base.spec.active]
+    for effect, w in matched_weights(base, effects, split).items():
+        t, p = signature_test(w, fit_eval.r, blocks, flips)
         row = {"key": key, "case": case.label, "seed": seed, "signature": f"matched:{effect}", "T": t, "p": p}
         total = float(np.sum(w**2))
         for test in TESTS:  # where the effect acts once the base has absorbed what it can

@@ -633,7 +633,7 @@ def model_table(summaries: list[dict]) -> list[str]:
             f"{', '.join(found['adopted']) or 'nothing'} | {', '.join(found['not_in_model'])} |"
         )
         if found["unexplained"]:
-            report = Path(found["report"] or "discovery")
+            report = Path(found["report"] or DISCOVERY_FOLDER)
             if not report.is_absolute():  # relative to the result folder, which index.md names by its label
                 report = Path(s.get("label", s["material"])) / report
             notes.append(

@@ -200,16 +200,16 @@ def test_signature_power_statistic_table_and_refusals(tmp_path, capsys):
     along w, NaN for an empty weight); the table and summary are the rows'; bad arguments exit 2."""
     import signature_power as sp
 
-    from peano_bayes.discovery.diagnose import N_FLIPS, signature_statistic
+    from peano_bayes.discovery.diagnose import N_FLIPS, sign_flips
 
     rng = np.random.default_rng(5)
-    block = np.repeat(np.arange(30), 10)
+    blocks, flips = sign_flips(np.repeat(np.arange(30), 10), seed=1)
     w, noise = rng.normal(size=300), rng.normal(size=300)
-    t, p = sp.sign_flip_p(w, noise, block, seed=1)
-    assert t == pytest.approx(signature_statistic(noise, w), rel=1e-12) and 0.0 < p <= 1.0
-    t, p = sp.sign_flip_p(w, noise + 8.0 * w / np.linalg.norm(w), block, seed=1)
+    t, p = sp.signature_test(w, noise, blocks, flips)
+    assert t == pytest.approx(abs(w @ noise) / np.linalg.norm(w), rel=1e-12) and 0.0 < p <= 1.0
+    t, p = sp.signature_test(w, noise + 8.0 * w / np.linalg.norm(w), blocks, flips)
     assert t > 7.0 and p == pytest.approx(1.0 / (N_FLIPS + 1), rel=1e-12)
-    assert all(np.isnan(sp.sign_flip_p(np.zeros(300), noise, block, seed=1)))
+    assert all(np.isnan(sp.signature_test(np.zeros(300), noise, blocks, flips)))
 
     table = pd.DataFrame(
         [{"key": f"{c}|{s}", "case": c, "seed": s, "signature": "matched:x", "T": t, "p": p, "share_load_cycle": 0.1,

@@ -171,28 +171,47 @@ def _holm(p: dict) -> dict:
     return out
 
 
+def sign_flips(block: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(blocks, flips)``: each bin's block index 0..B-1 (n,) from the block ids ``block``, and the
+    (:data:`N_FLIPS`, B) random signs the p-values of :func:`sign_flip_p` flip the block sums with."""
+    blocks = np.unique(block, return_inverse=True)[1]
+    flips = np.random.default_rng(seed).choice([-1.0, 1.0], size=(N_FLIPS, int(blocks.max()) + 1))
+    return blocks, flips
+
+
+def sign_flip_p(w: np.ndarray, v: np.ndarray, blocks: np.ndarray, flips: np.ndarray) -> float:
+    """Block sign-flip p-value of ``|sum w v|`` (``blocks``, ``flips`` from :func:`sign_flips`); 1 for a zero
+    weight."""
+    if not np.any(w):
+        return 1.0
+    sums = np.bincount(blocks, weights=w * v, minlength=flips.shape[1])
+    observed = abs(sums.sum())
+    return float((1 + np.sum(np.abs(flips @ sums) >= observed - 1e-12)) / (N_FLIPS + 1))
+
+
 def diagnose(r: np.ndarray, cov: Covariates, predicted: np.ndarray, *, alpha: float = 0.01, seed: int = 0) -> Diagnosis:
     """Signature statistics and p-values of standardized residuals ``r`` (n,) of a fit."""
-    rng = np.random.default_rng(seed)
-    blocks = np.unique(cov.block, return_inverse=True)[1]
-    n_blocks = int(blocks.max()) + 1
-    flips = rng.choice([-1.0, 1.0], size=(N_FLIPS, n_blocks))
+    blocks, flips = sign_flips(cov.block, seed)
+    n_blocks = flips.shape[1]
     weights = signature_weights(cov, predicted)
     statistic, p_value = {}, {}
     for name in SIGNATURES:
         w = weights[name]
-        v = r**2 - 1.0 if name in SQUARED else r
-        sums = np.bincount(blocks, weights=w * v, minlength=n_blocks)
-        observed = abs(sums.sum())
         statistic[name] = signature_statistic(r, w, name in SQUARED)
-        if not np.any(w):
-            p_value[name] = 1.0
-            continue
-        p_value[name] = float((1 + np.sum(np.abs(flips @ sums) >= observed - 1e-12)) / (N_FLIPS + 1))
+        p_value[name] = sign_flip_p(w, r**2 - 1.0 if name in SQUARED else r, blocks, flips)
     counts = np.bincount(blocks, minlength=n_blocks)
     z = np.bincount(blocks, weights=r, minlength=n_blocks) / np.sqrt(np.maximum(counts, 1))
     omnibus = float(stats.chi2.sf(np.sum(z**2), n_blocks))
     return Diagnosis(statistic, p_value, _holm(p_value), omnibus, alpha)
 
 
-__all__ = ["Diagnosis", "N_FLIPS", "SIGNATURES", "diagnose", "signature_statistic", "signature_weights"]
+__all__ = [
+    "Diagnosis",
+    "N_FLIPS",
+    "SIGNATURES",
+    "diagnose",
+    "sign_flip_p",
+    "sign_flips",
+    "signature_statistic",
+    "signature_weights",
+]
