@@ -1,5 +1,6 @@
 """Shared test set-up: float64 JAX (enabled by importing the package) and small helpers."""
 
+import os
 import warnings
 
 import numpy as np
@@ -11,6 +12,16 @@ from peano_bayes.fanout import cap_threads
 # One compute thread per process, set before JAX starts its backend: the suite runs as two xdist workers on two
 # cores, and the Dask workers, notebook kernels and command-line subprocesses that tests start inherit the same
 # XLA flags, which JAX's persistent cache keys on, so they read the programs this process compiled.
+#
+# Compiling is most of the suite's time, and most of compiling is LLVM's optimization of the emitted code. The
+# suite compiles at backend optimization level 0 without LLVM's expensive passes (measured on a cold cache on
+# the three costliest compile-bound tests: 283 s -> 215 s; their run time doubles, from under a second; the
+# whole suite 1170 s -> 766 s with the shared fit group below). XLA's CPU fast-math is off, so the optimizer
+# changes results by round-off only (one test saw 1 ulp: tests/test_rig.py); the main job, the studies and the
+# benchmarks run at the default level.
+SUITE_XLA_FLAGS = "--xla_backend_optimization_level=0 --xla_llvm_disable_expensive_passes=true"
+if SUITE_XLA_FLAGS not in os.environ.get("XLA_FLAGS", ""):
+    os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {SUITE_XLA_FLAGS}".strip()
 cap_threads()
 
 from peano_bayes.jax_config import enable_compilation_cache  # noqa: E402  (also float64 for every test)

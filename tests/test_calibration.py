@@ -6,6 +6,7 @@ The study itself (100+ replicates run to the convergence gates, coverage table c
 import json
 
 import numpy as np
+import pytest
 
 from peano_bayes.validation.sbc import (
     LEVELS,
@@ -37,6 +38,7 @@ def test_coverage_table_counts_and_rank_test():
     assert coverage_table(lumped, ["x"])[0]["rank_chi2_p"] < 1e-6
 
 
+@pytest.mark.xdist_group("short_tp_fits")  # its SBC posterior is the fan-out test's unit (tests/test_fanout.py)
 def test_sbc_replicates_share_one_compiled_posterior_and_report_ranks_and_coverage():
     """The study's machinery on two short replicates: each draws its own truth from the prior, swaps its data into
     the base posterior's compiled functions (``with_observations``: the base, never sampled itself, ends up holding

@@ -35,7 +35,7 @@ def test_committed_notebook_has_no_outputs():
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("fit_tp_two_cycles")
+@pytest.mark.xdist_group("short_tp_fits")
 def test_walkthrough_runs_in_its_fast_setting(tmp_path, monkeypatch):
     monkeypatch.setenv("PEANO_BAYES_NOTEBOOK_FAST", "1")
     monkeypatch.setenv("TMPDIR", str(tmp_path))  # the notebook's results folder (tempfile.mkdtemp)
