@@ -13,12 +13,10 @@ from peano_bayes.fanout import cap_threads
 # cores, and the Dask workers, notebook kernels and command-line subprocesses that tests start inherit the same
 # XLA flags, which JAX's persistent cache keys on, so they read the programs this process compiled.
 #
-# Compiling is most of the suite's time, and most of compiling is LLVM's optimization of the emitted code. The
-# suite compiles at backend optimization level 0 without LLVM's expensive passes (measured on a cold cache on
-# the three costliest compile-bound tests: 283 s -> 215 s; their run time doubles, from under a second; the
-# whole suite 1170 s -> 766 s with the shared fit group below). XLA's CPU fast-math is off, so the optimizer
-# changes results by round-off only (one test saw 1 ulp: tests/test_rig.py); the main job, the studies and the
-# benchmarks run at the default level.
+# Compiling is most of the suite's time, and most of compiling is LLVM's optimization of the emitted code, so
+# the suite compiles at backend optimization level 0 without LLVM's expensive passes (figures: docs/validation.md,
+# Known shortfalls). XLA's CPU fast-math is off, so this changes results by round-off only (tests/test_rig.py
+# saw 1 ulp); the main job, the studies and the benchmarks compile at the default level.
 SUITE_XLA_FLAGS = "--xla_backend_optimization_level=0 --xla_llvm_disable_expensive_passes=true"
 if SUITE_XLA_FLAGS not in os.environ.get("XLA_FLAGS", ""):
     os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {SUITE_XLA_FLAGS}".strip()
