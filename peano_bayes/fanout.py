@@ -269,15 +269,18 @@ def raise_failures(outcomes: Sequence[Outcome], what: str = "work unit") -> None
         raise PeanoBayesError(f"{len(failed)} of {len(outcomes)} {what}(s) failed: {lines}")
 
 
-def _one_thread_env() -> dict[str, str]:
-    """:data:`WORKER_ENV`, with the XLA flags appended to any this process already has (those it has already
-    are not repeated: JAX's persistent cache keys on the flag list, so a capped process and the workers it
-    starts build programs under one key and read each other's)."""
-    env = dict(WORKER_ENV)
+def xla_flags_with(flags: str) -> str:
+    """This process's ``XLA_FLAGS`` with ``flags`` (space-separated) appended, those it has already not
+    repeated: JAX's persistent cache keys on the flag list, so a process and the workers or subprocesses it
+    starts with these flags build programs under one key and read each other's."""
     present = os.environ.get("XLA_FLAGS", "").split()
-    missing = [flag for flag in ONE_THREAD_XLA_FLAGS.split() if flag not in present]
-    env["XLA_FLAGS"] = " ".join(present + missing)
-    return env
+    missing = [flag for flag in flags.split() if flag not in present]
+    return " ".join(present + missing)
+
+
+def _one_thread_env() -> dict[str, str]:
+    """:data:`WORKER_ENV`, its XLA flags appended to any this process already has (:func:`xla_flags_with`)."""
+    return {**WORKER_ENV, "XLA_FLAGS": xla_flags_with(ONE_THREAD_XLA_FLAGS)}
 
 
 def cap_threads() -> None:
