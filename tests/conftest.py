@@ -14,10 +14,10 @@ from peano_bayes.fanout import cap_threads, xla_flags_with
 # XLA flags, which JAX's persistent cache keys on, so they read the programs this process compiled.
 #
 # Compiling is most of the suite's time, and LLVM's optimization most of compiling; the sampling tests also run
-# their programs thousands of times. LLVM level 1 is the balance: level 0 compiles faster and runs slower, so it
-# loses on the sampling tests what it gains on the large programs (figures: docs/validation.md, Known
-# shortfalls). XLA's CPU fast-math is off, so the level changes results by round-off only (tests/test_rig.py saw
-# 1 ulp); the main job, the studies and the benchmarks compile at the default level.
+# their programs thousands of times. XLA's backend optimization level 1 is the balance: level 0 compiles faster
+# and runs slower, so it loses on the sampling tests what it gains on the large programs (figures:
+# docs/validation.md, Known shortfalls). XLA's CPU fast-math is off, so the level changes results by round-off
+# only (tests/test_rig.py saw 1 ulp); the main job, the studies and the benchmarks compile at the default level.
 SUITE_XLA_FLAGS = "--xla_backend_optimization_level=1"
 os.environ["XLA_FLAGS"] = xla_flags_with(SUITE_XLA_FLAGS)
 cap_threads()
