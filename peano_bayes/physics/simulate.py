@@ -310,7 +310,7 @@ def _solve_log_theta(
     """
     if z_pred is not None and QUASI_STATIC_ROUTE == "newton_first":
         solve = lambda fn, z: _newton_first(fn, z, increasing, iterations, atol)  # noqa: E731
-        return jax.lax.custom_root(residual, jax.lax.stop_gradient(z_pred), solve, lambda g, y: y / g(1.0))
+        return _implicit_root(residual, z_pred, solve)
     if z_pred is not None:
         lo, hi = _predicted_bracket(residual, increasing, jax.lax.stop_gradient(z_pred), atol)
         z_guess = 0.5 * (lo + hi)
@@ -338,6 +338,11 @@ def _solve_log_theta(
         z_guess = 0.5 * (lo + hi)
     lo, hi = jax.lax.stop_gradient(lo), jax.lax.stop_gradient(hi)
     solve = lambda fn, z: _newton_steps(fn, z, iterations, lo, hi, increasing)  # noqa: E731
+    return _implicit_root(residual, z_guess, solve)
+
+
+def _implicit_root(residual, z_guess, solve):
+    """``solve(residual, z_guess)`` with implicit-function gradients (a scalar root: the tangent is y / f')."""
     return jax.lax.custom_root(residual, jax.lax.stop_gradient(z_guess), solve, lambda g, y: y / g(1.0))
 
 
