@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import sys
 import time
@@ -144,7 +145,12 @@ def main(argv=None) -> dict:
         "ratio_vmap_vs_numpy_loop": results["load_cycle"]["vmap_evals_per_s"] / loop_rate,
         "target_ratio": 20.0,
         "meets_target": bool(ratio >= 20.0),
-        "machine": {"cpus": jax.local_device_count(), "platform": platform.platform(), "jax": jax.__version__},
+        "machine": {
+            "cpus": os.cpu_count(),
+            "jax_devices": jax.local_device_count(),
+            "platform": platform.platform(),
+            "jax": jax.__version__,
+        },
     }
     print(json.dumps(summary))
     return summary

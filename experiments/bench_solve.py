@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import sys
 import time
@@ -150,7 +151,12 @@ def main(argv=None) -> dict:
         "max_signal_difference_from_reference": difference,
         "reference": REFERENCE,
         "speedup_over_reference": speedup,
-        "machine": {"cpus": jax.local_device_count(), "platform": platform.platform(), "jax": jax.__version__},
+        "machine": {
+            "cpus": os.cpu_count(),
+            "jax_devices": jax.local_device_count(),
+            "platform": platform.platform(),
+            "jax": jax.__version__,
+        },
     }
     print(json.dumps(summary))
     return summary
