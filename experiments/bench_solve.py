@@ -9,7 +9,7 @@ Three routes to each time step's root (``peano_bayes.physics.simulate.QUASI_STAT
   it misses), then Newton;
 - ``bracket_first``: a bracket of +-4.5e-4 around the root extrapolated from the previous two samples,
   searched outward and bisected only where it misses, then safeguarded Newton;
-- ``newton_first`` (the package's route): two plain Newton steps from the extrapolated root, accepted where
+- ``newton_first`` (the package's route): three plain Newton steps from the extrapolated root, accepted where
   they converge; the ``bracket_first`` route at the samples where some member's did not.
 
 All compile apart (timed, excluded from the rates) and simulate the same rows and parameter sets; they solve

@@ -12,6 +12,7 @@ import json
 from dataclasses import replace
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -507,8 +508,8 @@ def test_fit_models_solves_in_batches_of_one_shape(monkeypatch):
 
     calls = []
 
-    def fake_solve(u0, masks, pinned, data):
-        calls.append((np.asarray(u0), masks.shape, pinned.shape))
+    def fake_solve(u0, masks, pinned, data, width):
+        calls.append((np.asarray(u0), masks.shape, pinned.shape, width))
         k = u0.shape[0]
         return u0, np.full(k, np.inf), np.zeros(k, dtype=bool)  # every fit "failed": no Laplace step
 
@@ -519,8 +520,55 @@ def test_fit_models_solves_in_batches_of_one_shape(monkeypatch):
     d = len(NAMES)
     assert [c[0].shape for c in calls] == [(fitting.BATCH, d)] * 2
     assert all(c[1] == c[2] == (fitting.BATCH, d) for c in calls)
+    assert [c[3] for c in calls] == [16, 16]  # the base frees 12 of the 28: the narrow Jacobian
     sent = np.concatenate([c[0] for c in calls])[: len(starts)]
     np.testing.assert_array_equal(sent, np.stack([to_unconstrained(s) for s in starts]))
+
+
+def test_jacobian_width_is_the_narrowest_that_holds_every_free_parameter():
+    from peano_bayes.discovery.fitting import JACOBIAN_WIDTHS, jacobian_width
+
+    d = len(NAMES)
+    masks = np.zeros((3, d), dtype=bool)
+    masks[0, :5] = True
+    assert jacobian_width(masks) == JACOBIAN_WIDTHS[0] == 16
+    masks[2, :16] = True
+    assert jacobian_width(masks) == 16
+    masks[1, :17] = True
+    assert jacobian_width(masks) == d
+
+
+def test_free_basis_holds_the_free_unit_vectors_in_order_then_zeros():
+    from peano_bayes.discovery.fitting import free_basis
+
+    mask = np.array([False, True, False, True, True, False])
+    basis = np.asarray(free_basis(jnp.asarray(mask), 4))
+    expected = np.zeros((6, 4))
+    expected[[1, 3, 4], [0, 1, 2]] = 1.0
+    np.testing.assert_array_equal(basis, expected)
+
+
+def test_dense_jacobian_on_a_basis_of_the_free_directions_equals_the_full_one():
+    """With a basis spanning the directions the residuals depend on, the narrow forward-mode Jacobian mapped back
+    equals the full one, entry for entry (columns of fixed entries zero), and so do the tangents it gives."""
+    from peano_bayes.discovery.fitting import free_basis
+    from peano_bayes.inference.fit import dense_jacobian
+
+    mask = jnp.asarray([True, False, True, True, False])
+    pinned = jnp.asarray([0.0, 2.0, 0.0, 0.0, -1.0])
+
+    def residuals(u, args):
+        x = jnp.where(args, u, pinned)
+        return jnp.stack([jnp.sin(x[0]) * x[1], x[2] ** 2 + x[4] * x[3], jnp.exp(x[3] - x[0]), x[1] * x[2]])
+
+    u = jnp.asarray([0.3, 0.7, -1.2, 0.4, 2.0])
+    full = jax.jacfwd(residuals)(u, mask)
+    narrow = dense_jacobian(residuals, basis=lambda v, args: free_basis(args, 4))
+    via_basis = jax.jacfwd(narrow)(u, mask)
+    np.testing.assert_allclose(via_basis, full, rtol=1e-14, atol=0.0)
+    assert np.all(np.asarray(via_basis)[:, [1, 4]] == 0.0)
+    tangent = jnp.asarray([0.5, -1.0, 2.0, 0.25, 3.0])
+    np.testing.assert_allclose(jax.jvp(lambda v: narrow(v, mask), (u,), (tangent,))[1], full @ tangent, rtol=1e-14)
 
 
 def test_sensor_offset_and_gain_compete_with_physics_but_widening_noise_comes_last():

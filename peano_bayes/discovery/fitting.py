@@ -5,12 +5,13 @@ The objective is the Gaussian negative log-likelihood of the binned data with th
 :mod:`.data`, written as a sum of squares: standardized residuals, the estimated error of the fitted inputs in
 its N(0, 1) units (profiled, see :class:`~.model.Flat`), ``sqrt(2 log(sd / sd0))`` for the
 heteroscedastic noise option, and a weak ridge ``(u - start) / RIDGE_SD`` on the free parameters (numerical
-stability on flat directions, not a prior). Every function is compiled once per data shape; masks, pinned
-values and data are arguments.
+stability on flat directions, not a prior). Every function is compiled once per data shape (the solve once per
+Jacobian width it is called at, :data:`JACOBIAN_WIDTHS`); masks, pinned values and data are arguments.
 """
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import jax
@@ -58,13 +59,43 @@ def _n_data_residuals(data: DiscoveryData) -> int:
     return sum(g.observed.size for g in data.groups) + data.n_error_sets * q
 
 
-_RESIDUALS = dense_jacobian(lambda u, args: _objective(u, *args)[0])
+#: Widths of the Levenberg-Marquardt Jacobian, in forward tangents: a batch of fits is solved at the narrowest
+#: that holds its largest number of free parameters (:func:`jacobian_width`). A base model frees 12-13 of the
+#: 28 superset parameters and each candidate adds 1-3, so the base and its first screening fit in 16 tangents
+#: instead of 28; each width used compiles once.
+JACOBIAN_WIDTHS = (16, len(NAMES))
 
 
-@jax.jit
-def _solve(starts, masks, pinned, data: DiscoveryData):
+def jacobian_width(masks) -> int:
+    """The narrowest of :data:`JACOBIAN_WIDTHS` that holds every mask's free parameters (masks (m, d) bool)."""
+    most = int(np.max(np.sum(masks, axis=-1)))
+    return next(w for w in JACOBIAN_WIDTHS if w >= most)
+
+
+def free_basis(mask, width: int):
+    """(d, width) unit vectors of the free entries of ``mask`` (d,) bool, in their order, then zero columns:
+    the only directions in which the objective changes (values held fixed and their ridge terms ignore u)."""
+    order = jnp.argsort(jnp.logical_not(mask).astype(jnp.int32), stable=True)[:width]
+    used = jnp.arange(width) < jnp.sum(mask)
+    return jnp.eye(mask.shape[0])[:, order] * used
+
+
+@functools.cache
+def _residuals(width: int):
+    """The objective's residual vector with its Jacobian materialized in ``width`` forward tangents (all of
+    ``NAMES`` at the full width)."""
+    basis = None if width >= len(NAMES) else (lambda u, args: free_basis(args[1], width))
+    return dense_jacobian(lambda u, args: _objective(u, *args)[0], basis=basis)
+
+
+@functools.partial(jax.jit, static_argnames="width")
+def _solve(starts, masks, pinned, data: DiscoveryData, width: int = len(NAMES)):
+    """Levenberg-Marquardt from each ``starts`` row (m, d) with its mask and pinned values; ``width`` at least
+    every mask's number of free parameters (:func:`jacobian_width`)."""
+    objective = _residuals(width)
+
     def one(u0, mask, pin):
-        sol = optx.least_squares(_RESIDUALS, _SOLVER, u0, (data, mask, pin, u0), max_steps=MAX_STEPS, throw=False)
+        sol = optx.least_squares(objective, _SOLVER, u0, (data, mask, pin, u0), max_steps=MAX_STEPS, throw=False)
         residuals, solver_error = _objective(sol.value, data, mask, pin, u0)
         cost = 0.5 * jnp.sum(residuals**2)
         ok = jnp.isfinite(cost) & (solver_error <= 1.0)
@@ -137,7 +168,12 @@ def fit_models(specs, starts, data: DiscoveryData) -> list[ModelFit | None]:
     pinned = np.stack([s.pinned for s in specs])
     # Batch by batch: a (BATCH, d) shape every call, where one call on all n would compile once per distinct n.
     solved = [
-        _solve(*(jnp.asarray(a[i : i + BATCH]) for a in (u0, masks, pinned)), data) for i in range(0, len(specs), BATCH)
+        _solve(
+            *(jnp.asarray(a[i : i + BATCH]) for a in (u0, masks, pinned)),
+            data,
+            width=jacobian_width(masks[i : i + BATCH]),
+        )
+        for i in range(0, len(specs), BATCH)
     ]
     us, costs, converged = (np.concatenate([np.asarray(b[k]) for b in solved])[:n] for k in range(3))
     out = []

@@ -34,9 +34,13 @@ DEFAULT_NOISE = {
 }
 
 
-def dense_jacobian(residuals):
+def dense_jacobian(residuals, basis=None):
     """``residuals(u, args)`` (u (d,) -> (n,)) whose derivative in ``u`` is its forward-mode Jacobian (n, d),
-    materialized once per point; ``args`` are not differentiated.
+    materialized once per point; ``args`` are not differentiated. ``basis(u, args)``, if given, returns a (d, k)
+    matrix whose columns span every direction in which the residuals can change (for a fit that holds some of
+    ``u`` fixed, the unit vectors of the free entries, padded with zero columns): the Jacobian is then pushed
+    forward along those k directions only and mapped back, ``J_k B^T``, exact where the columns span the free
+    directions and k forward tangents cheaper than d.
 
     Why: optimistix's Levenberg-Marquardt linearizes the residual function and transposes that linearization for
     the gradient of its trust-region test. Through the physics' scans and root solves that builds the model's
@@ -57,7 +61,12 @@ def dense_jacobian(residuals):
             r = residuals(v, args)
             return r, r
 
-        jac, r = jax.jacfwd(both, has_aux=True)(u)
+        if basis is None:
+            jac, r = jax.jacfwd(both, has_aux=True)(u)
+        else:
+            b = basis(u, args)
+            jac_k, r = jax.jacfwd(lambda z: both(u + b @ z), has_aux=True)(jnp.zeros(b.shape[1], u.dtype))
+            jac = jac_k @ b.T
         return r, jac @ tangents[0]
 
     return wrapped
