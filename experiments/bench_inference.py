@@ -9,8 +9,8 @@ for TP).
 
 - **ours**: :func:`peano_bayes.pipeline.infer` as the command line runs it (least squares, posterior mode, four
   ensembles to the convergence gates). Its sampling seconds include the warm-up; least squares, the mode and the
-  compilation are timed apart. ESS is the tool's (arviz bulk ESS, each ensemble's walkers pooled into one chain,
-  minimum over parameters), and, as a cross-check that does not rest on pooling, walker-draws / tau_max.
+  compilation are timed apart. ESS is the tool's (arviz bulk ESS, every walker a chain, minimum over parameters),
+  and, as a cross-check, walker-draws / tau_max.
 - **(a) NumPy emcee**: no NumPy twin of the whole posterior exists; ``numpy_load_cycle.py`` is the twin of our
   load-cycle solver (checked equal first). The same sampler run on a NumPy port would evaluate at least the
   load cycles at every walker and step, so its time per step is bounded below by that many NumPy load-cycle
@@ -57,7 +57,6 @@ from peano_bayes.discovery.choice import configured_model  # noqa: E402
 from peano_bayes.inference import build_posterior, prepare  # noqa: E402
 from peano_bayes.inference.laplace import _laplace_covariance, finite_difference_hessian  # noqa: E402
 from peano_bayes.inference.posterior import DEFAULT_HELD  # noqa: E402
-from peano_bayes.inference.sample import pooled  # noqa: E402
 from peano_bayes.jax_config import enable_compilation_cache  # noqa: E402
 from peano_bayes.physics import LoadCycle, simulate_load_cycle  # noqa: E402
 from peano_bayes.pipeline import (  # noqa: E402
@@ -175,11 +174,10 @@ def posterior_agreement(posterior, ours: np.ndarray, nuts: np.ndarray, n_ensembl
     """NUTS's posterior against ours by the rule and measure of ``reference_run.agreement``: per entry of theta,
     the mean's and the 94 % interval ends' differences in ours' sd and in the two runs' combined Monte Carlo
     error, the worst of each, and whether they are within 0.1 / 0.2 sd. ``ours`` is (walkers, draws, D), its
-    ensembles' walkers pooled into one chain each as the convergence rule does; ``nuts`` one chain (draws, D)."""
-    chains = pooled(np.moveaxis(ours, 0, 1), n_ensembles)  # (ensembles, walkers per ensemble * draws, D)
+    walkers each a chain as the convergence rule's ESS counts them; ``nuts`` one chain (draws, D)."""
     return agreement(
         {name: nuts[None, :, i] for i, name in enumerate(posterior.names)},
-        {name: chains[..., i] for i, name in enumerate(posterior.names)},
+        {name: ours[..., i] for i, name in enumerate(posterior.names)},
     )
 
 

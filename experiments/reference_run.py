@@ -8,7 +8,7 @@ specimen values and contrasts, a new specimen, the spread, the noise scales): th
 94 % interval ends (3 % and 97 % quantiles, equal-tailed, where ``summary.json`` reports HDIs), each in units of
 the reference's sd. The main-job issue's rule for "the same posterior" is means within 0.1 sd and interval ends
 within 0.2 sd. Each difference is also given in units of its Monte Carlo standard error (both runs' arviz MCSE,
-each ensemble's walkers pooled into one chain as the convergence rule pools them): at the rule's ESS of 1000 an
+every walker a chain, as the convergence rule's ESS counts them): at the rule's ESS of 1000 an
 interval end's own error is about 0.09 sd, so a difference beyond 0.2 sd that is within 3 MCSE is noise, not a
 wrong posterior.
 
@@ -37,7 +37,6 @@ import numpy as np
 
 from peano_bayes import enable_compilation_cache
 from peano_bayes.bundled import dataset_path
-from peano_bayes.inference.sample import pooled
 from peano_bayes.pipeline import infer
 
 #: The rule for "the same posterior", in units of the reference's sd.
@@ -55,19 +54,18 @@ def certified_warmup(summary: dict) -> int:
     return int(conv["discard_steps"]) - int(np.ceil(2.0 * max(conv["tau_steps"].values())))
 
 
-def draws_by_quantity(path: Path, n_ensembles: int) -> dict[str, np.ndarray]:
-    """(n_ensembles, n) draws of every scalar quantity of ``posterior.nc``'s posterior group, each ensemble's
-    walkers (the file's chains, ensemble by ensemble) laid end to end; a quantity with more dimensions than
-    chain and draw (a per-specimen value) gives one entry per element, ``name[i]``."""
+def draws_by_quantity(path: Path) -> dict[str, np.ndarray]:
+    """(walkers, draws) of every scalar quantity of ``posterior.nc``'s posterior group (every walker a chain, as
+    the convergence rule's ESS counts them); a quantity with more dimensions than chain and draw (a
+    per-specimen value) gives one entry per element, ``name[i]``."""
     posterior = az.from_netcdf(path).posterior
     out = {}
     for name, var in posterior.data_vars.items():
         values = np.asarray(var, dtype=float).reshape(var.shape[0], var.shape[1], -1)  # (walkers, draws, k)
-        chains = pooled(np.moveaxis(values, 0, 1), n_ensembles)  # (ensembles, walkers * draws, k)
-        if chains.shape[-1] == 1:
-            out[name] = chains[..., 0]
+        if values.shape[-1] == 1:
+            out[name] = values[..., 0]
         else:
-            out.update({f"{name}[{i}]": chains[..., i] for i in range(chains.shape[-1])})
+            out.update({f"{name}[{i}]": values[..., i] for i in range(values.shape[-1])})
     return out
 
 
@@ -153,8 +151,8 @@ def main() -> None:
         parser.error(f"{args.certified}: the run is not converged; the comparison needs a certified run")
     if args.against is not None:
         same = agreement(
-            draws_by_quantity(args.certified / "posterior.nc", summary["n_ensembles"]),
-            draws_by_quantity(args.against / "posterior.nc", summary["n_ensembles"]),
+            draws_by_quantity(args.certified / "posterior.nc"),
+            draws_by_quantity(args.against / "posterior.nc"),
         )
         rows = same.pop("rows")
         print(
@@ -218,10 +216,9 @@ def main() -> None:
     for key in ("model", "prior"):
         if reference[key] != summary[key]:
             sys.exit(f"the reference's {key} differs from the certified run's: {reference[key]} against {summary[key]}")
-    n_ensembles = summary["n_ensembles"]
     same = agreement(
-        draws_by_quantity(args.certified / "posterior.nc", n_ensembles),
-        draws_by_quantity(folder / "posterior.nc", n_ensembles),
+        draws_by_quantity(args.certified / "posterior.nc"),
+        draws_by_quantity(folder / "posterior.nc"),
     )
     conv = reference["convergence"]
     print(f"certified: {material}, {steps} steps, seed {summary['seed']}")

@@ -143,8 +143,8 @@ def _main(argv: list[str] | None) -> int:
         if args.verbose:
             traceback.print_exc()
         return stop(EXIT_FAILED, "failed", str(err))
-    except KeyboardInterrupt:
-        return stop(EXIT_INTERRUPTED, "interrupted", "")
+    except KeyboardInterrupt as err:  # a sampler's own stop says where it saved its state
+        return stop(EXIT_INTERRUPTED, "interrupted", str(err))
     finally:
         if human not in (sys.stdout, sys.stderr):
             human.close()

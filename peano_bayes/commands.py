@@ -20,11 +20,13 @@ from pathlib import Path
 from . import bundled
 from .defaults import (
     ALL_TESTS,
+    CONTRAST_CHOICES,
     COORDINATE_KINDS,
     DEFAULT_CHUNK,
     DEFAULT_COORDINATES,
     DEFAULT_ENSEMBLES,
     DEFAULT_MAX_STEPS,
+    DEFAULT_MAX_WARMUP,
     DEFAULT_STARTS,
     DEFAULT_TESTS,
     DEFAULT_WARMUP,
@@ -305,7 +307,8 @@ def _sampling_arguments(p, *, discover_by_default: bool = False):
         "--warmup",
         type=int,
         default=DEFAULT_WARMUP,
-        help=f"warm-up steps, discarded, that fit the proposal (default: {DEFAULT_WARMUP})",
+        help=f"warm-up steps, discarded, that fit the proposal (default: as long as the proposal needs to settle, "
+        f"at most {DEFAULT_MAX_WARMUP}; see docs/inference.md)",
     )
     p.add_argument(
         "--coordinates",
@@ -313,6 +316,13 @@ def _sampling_arguments(p, *, discover_by_default: bool = False):
         default=DEFAULT_COORDINATES,
         help=f"what the sampler moves: the tensile element as its log stretches at two forces, or theta itself "
         f"(default: {DEFAULT_COORDINATES}; see docs/inference.md)",
+    )
+    p.add_argument(
+        "--contrasts",
+        choices=CONTRAST_CHOICES,
+        default=CONTRAST_CHOICES[0],
+        help="specimen contrasts: 'auto' samples those the data pin little as multiples of the spread "
+        "(non-centred), 'centred' samples all as they are (default: auto; see docs/inference.md)",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.add_argument(
@@ -334,7 +344,7 @@ def _check_sampling(args):
     for name in ("starts", "chunk", "max_steps"):
         if getattr(args, name) < 1:
             raise PeanoBayesInputError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
-    if args.warmup < 0:
+    if args.warmup is not None and args.warmup < 0:
         raise PeanoBayesInputError(f"--warmup must be >= 0, got {args.warmup}")
     if args.walkers is not None and args.walkers < 4:
         raise PeanoBayesInputError(f"--walkers must be >= 4, got {args.walkers}")
@@ -353,6 +363,7 @@ def _check_sampling(args):
         sample_all=args.sample_all,
         discover=args.discover,
         coordinates=args.coordinates,
+        contrasts=args.contrasts,
     )
 
 

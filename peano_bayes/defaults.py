@@ -21,14 +21,17 @@ DEFAULT_STARTS = 16
 #: Independently started emcee ensembles per fit; R-hat compares them (at least 4, see
 #: :data:`peano_bayes.inference.sample.MIN_ENSEMBLES`).
 DEFAULT_ENSEMBLES = 4
-#: Sampler steps between saved states and convergence checks.
+#: Most sampler steps between saved states and convergence checks (each chunk is planned from the last check).
 DEFAULT_CHUNK = 500
-#: Warm-up steps (discarded) that fit the sampler's proposal. The sampling phase's independence proposal is
-#: fitted to the warm-up's second half, 450 steps here against 150 with the former 300. From the same seed and
-#: least-squares start, TP's tau_max fell 23.2 -> 9.4 steps (1619 -> 1464 steps in all) and FC's 40.4 -> 18.8
-#: (2555 -> 1936). A run now lasts at least 1400 steps (warm-up plus the first chunk), so a material that
-#: mixed fast with 300 (TFC's 851 steps) runs longer (docs/validation.md, *Warm-up length*).
-DEFAULT_WARMUP = 900
+#: Warm-up steps (discarded) that fit the sampler's proposal: ``None`` lets the warm-up run until its proposal
+#: is stable (:func:`peano_bayes.inference.sample.adapt`), at most :data:`DEFAULT_MAX_WARMUP` steps; a number
+#: fixes it.
+DEFAULT_WARMUP = None
+#: Longest adaptive warm-up [steps]; a run that reaches it samples with the last proposal and says so.
+DEFAULT_MAX_WARMUP = 3600
+#: How a fit samples the specimen contrasts (``--contrasts``): ``auto`` samples those the data pin little as
+#: multiples of the between-specimen spread (:func:`peano_bayes.inference.coordinates.choose_noncentred`).
+CONTRAST_CHOICES = ("auto", "centred")
 #: What the sampler moves (:func:`peano_bayes.inference.coordinates.sampler_coordinates`): the series tensile
 #: element as its log stretches at 1 and 20 N. From the same seed, 1200 steps and the former 300-step warm-up,
 #: against theta itself (``experiments/coordinates_arms.py``): PR tau_max 40.4 -> 22.7 steps, min bulk ESS

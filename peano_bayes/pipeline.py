@@ -24,6 +24,7 @@ from .atomic import write_text
 from .data import Dataset, load
 from .defaults import (
     ALL_TESTS,
+    CONTRAST_CHOICES,
     DEFAULT_CHUNK,
     DEFAULT_COORDINATES,
     DEFAULT_ENSEMBLES,
@@ -35,7 +36,7 @@ from .defaults import (
 )
 from .errors import PeanoBayesError, PeanoBayesInputError
 from .formatting import format_number
-from .inference.coordinates import sampler_coordinates
+from .inference.coordinates import choose_noncentred, sampler_coordinates
 from .inference.fit import fit, fit_quality, predictions, residual_correlation, sensor_noise, structured_tests
 from .inference.laplace import Laplace, NonCentred, posterior_mode, refine_mode
 from .inference.likelihood import Observations, prepare
@@ -125,6 +126,7 @@ def least_squares(posterior, prior, *, n_starts: int = DEFAULT_STARTS, seed: int
         "n_step_limit": result.n_step_limit,
         "converged": result.converged,
         "rounds": result.rounds,
+        "optima": list(result.optima),
         "start_costs": result.start_costs.tolist(),
         "quality": result.quality,
         "seconds": result.seconds,
@@ -162,8 +164,7 @@ def walker_start(posterior, fitted: dict) -> tuple[np.ndarray, np.ndarray]:
     idx = [names.index(n) for n in fit_names]
     prior_u = posterior.prior.sample(np.random.default_rng(0), 2000)
     prior_sd = np.std(prior_u, axis=0)
-    centre_params = {**posterior.prior.median(), **fitted["params"], **fitted["noise_estimate"]}
-    centre[: posterior.prior.ndim] = np.asarray(posterior.prior.to_unconstrained(centre_params))
+    centre[: posterior.prior.ndim] = _theta_of(posterior, fitted, fitted["params"])
     # The Laplace covariance, capped at the prior's spread in each direction.
     fsd = np.sqrt(np.clip(np.diag(fit_cov), 1e-12, None))
     cap = np.minimum(fsd, prior_sd[idx]) / fsd
@@ -174,6 +175,25 @@ def walker_start(posterior, fitted: dict) -> tuple[np.ndarray, np.ndarray]:
         elif n.startswith(CONTRAST_PREFIX):
             cov[i, i] = 0.02**2
     return centre, cov
+
+
+def _theta_of(posterior, fitted: dict, params: dict) -> np.ndarray:
+    """The prior's part of theta at the least-squares ``params`` (name -> SI), with the fit's noise estimates and
+    the prior medians for what the fit does not set."""
+    point = {**posterior.prior.median(), **params, **fitted["noise_estimate"]}
+    return np.asarray(posterior.prior.to_unconstrained(point))
+
+
+def optimum_centres(posterior, fitted: dict, centre: np.ndarray) -> np.ndarray:
+    """(k, D) theta of the other least-squares optima of ``fitted`` (``fit.json``'s ``optima``; none in a file
+    written before they were recorded), each as ``centre`` with the prior's part at that optimum: where the
+    sampler's ensembles start before it draws dispersed centres."""
+    out = []
+    for params in fitted.get("optima", []):
+        theta = np.array(centre, dtype=float)
+        theta[: posterior.prior.ndim] = _theta_of(posterior, fitted, {**fitted["params"], **params})
+        out.append(theta)
+    return np.array(out).reshape(-1, len(centre))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -246,10 +266,11 @@ def _log_lags(posterior, lag1: dict, log) -> None:
         )
 
 
-def _linearisation_point(path: Path, state_path: Path, posterior) -> tuple[np.ndarray, dict]:
-    """The point a resumed run linearised its inputs' error at and the AR(1) residual correlations it took there
-    (``input_error_point.json``; none in a file written before they existed); a sampler state without it, or
-    with other parameters, was written by another likelihood and cannot be continued."""
+def _linearisation_point(path: Path, state_path: Path, posterior) -> tuple[np.ndarray, dict, tuple[bool, ...]]:
+    """The point a resumed run linearised its inputs' error at, the AR(1) residual correlations it took there
+    and which specimen contrasts it sampled non-centred (``input_error_point.json``; none in a file written
+    before they existed); a sampler state without it, or with other parameters, was written by another
+    likelihood and cannot be continued."""
     if not path.exists():
         raise PeanoBayesInputError(
             f"{state_path}: no {path.name} beside it: the state was written by an earlier version of peano-bayes, "
@@ -261,7 +282,8 @@ def _linearisation_point(path: Path, state_path: Path, posterior) -> tuple[np.nd
             f"{path}: linearised over the parameters {', '.join(stored.get('names') or [])}; this fit samples "
             f"{', '.join(posterior.names)}. Run again without --resume"
         )
-    return np.asarray(stored["theta"], dtype=float), dict(stored.get("residual_lag1", {}))
+    noncentred = tuple(bool(f) for f in stored.get("noncentred", ()))
+    return np.asarray(stored["theta"], dtype=float), dict(stored.get("residual_lag1", {})), noncentred
 
 
 #: Where in a result folder ``fit --discover`` and ``run`` write the discovery report.
@@ -363,6 +385,7 @@ def infer(
     figures: bool = True,
     discover: bool = False,
     coordinates: str = DEFAULT_COORDINATES,
+    contrasts: str = "auto",
     log=print,
 ) -> dict:
     """Fit, sample and write the results of one dataset into ``out_dir/<label>/``; return the summary.
@@ -383,8 +406,12 @@ def infer(
     configured model plus the physics effects it named (:func:`~peano_bayes.discovery.choice.choose_model`; a
     resumed run reads the report instead of running discovery again). ``summary.json``'s ``model`` records the
     choice either way. ``coordinates``: what the sampler moves, ``"theta"`` or ``"tensile_stretch"``
-    (:func:`~peano_bayes.inference.coordinates.sampler_coordinates`).
+    (:func:`~peano_bayes.inference.coordinates.sampler_coordinates`). ``contrasts``: ``"auto"`` samples each
+    specimen contrast the data pin little non-centred (:func:`~peano_bayes.inference.coordinates.
+    choose_noncentred`), ``"centred"`` none.
     """
+    if contrasts not in CONTRAST_CHOICES:
+        raise PeanoBayesInputError(f"contrasts={contrasts!r}: expected one of {', '.join(CONTRAST_CHOICES)}")
     timings = {}
     dataset = load(data) if not isinstance(data, Dataset) else data
     # The sensors' noise from every run of the file, before tests are left out: the quiet tests estimate it best.
@@ -441,22 +468,35 @@ def infer(
     start = None
     if resume and state_path.exists():  # a resumed run restores its walkers and needs no start
         # It reads back where its inputs' error was linearised and its AR(1) lags, so it samples the same posterior.
-        point, lag1 = _linearisation_point(linearised_path, state_path, posterior)
+        point, lag1, noncentred = _linearisation_point(linearised_path, state_path, posterior)
         posterior = posterior.with_input_error_at(point).with_residual_lag1(lag1)
         _log_lags(posterior, lag1, lambda m: log(f"{code}: {m}"))
         timings["compile_s"] = _first_call_seconds(posterior, centre)
     else:
         start = posterior_at_mode(posterior, centre, covariance, log=lambda m: log(f"{code}: {m}"))
         posterior, centre, covariance = start.posterior, start.laplace.mode, start.laplace.covariance
-        record = {"names": list(posterior.names), "theta": start.exact.mode.tolist(), "residual_lag1": start.lag1}
+        noncentred = choose_noncentred(posterior, centre, covariance) if contrasts == "auto" else ()
+        record = {
+            "names": list(posterior.names),
+            "theta": start.exact.mode.tolist(),
+            "residual_lag1": start.lag1,
+            "noncentred": list(noncentred),
+        }
         write_text(linearised_path, json.dumps(record))
         timings["compile_s"] = start.compile_s
         timings["mode_s"] = start.exact.seconds + start.laplace.seconds
-    sampler = sampler_coordinates(posterior, coordinates)
+    if any(noncentred):
+        which = [n for n, f in zip(posterior.contrast_names, noncentred, strict=True) if f]
+        log(f"{code}: {len(which)} of {len(noncentred)} specimen contrasts sampled non-centred ({', '.join(which)})")
+    sampler = sampler_coordinates(posterior, coordinates, noncentred)
+    optima = optimum_centres(posterior, fitted, centre)
+    if len(optima):
+        log(f"{code}: {len(optima)} other least-squares optim{'a' if len(optima) > 1 else 'um'}: ensembles start there")
     result = sample(
         posterior,
         centre,
         covariance,
+        optima=optima,
         n_walkers=n_walkers,
         n_ensembles=n_ensembles,
         seed=seed,
@@ -519,6 +559,9 @@ def infer(
         "seed": seed,
         "n_walkers": n_walkers,
         "warmup": result.warmup,
+        "warmup_stable": result.warmup_stable,
+        "warmup_changes": result.warmup_changes,
+        "checks": [{"steps": int(a), "tau_max": float(b)} for a, b in result.checks],
         "n_ensembles": result.n_ensembles,
         "steps": int(result.chain.shape[0]),
         "resumed_from_step": result.resumed_from,
@@ -889,16 +932,49 @@ def reference_models(directory: Path, summary: dict, *, log=print) -> dict | Non
     return comparison
 
 
-def report_results(out_dir: str | Path, materials=BUNDLED_MATERIALS, *, n_draws: int = 100, log=print) -> dict:
+def material_report(
+    directory: Path, summary: dict, *, n_draws: int = 100, log=print
+) -> tuple[dict | None, dict | None]:
+    """One finished material's part of the report, each piece computed only where it is missing: the reference
+    models' fit (:func:`reference_models`), ``metrics.json`` (:func:`~peano_bayes.metrics.evaluate_result`, kept
+    if written by this version) and ``figures/``. Returns ``(reference models, metrics)``, ``None`` for what
+    could not be had. The main job's workers run it as soon as their material is sampled, so the parent's
+    report only reads it back."""
+    from .figures import material_figures
+    from .metrics import evaluate_result, metrics_current, read_metrics
+
+    code = summary["material"]
+    references = reference_models(directory, summary, log=log)
+    current = metrics_current(directory)
+    if not current:
+        log(f"{code}: Table 3 metrics from {n_draws} posterior draws ...")
+        try:
+            evaluate_result(directory, n_draws=n_draws, progress=False)
+            current = True
+        except PeanoBayesError as err:  # one material's metrics must not stop the others' report
+            log(f"{code}: no Table 3 metrics: {err}")
+    if not (directory / "figures" / "corner.png").exists():
+        source = Path(summary["dataset"])
+        material_figures(directory, load(source) if source.exists() else None)
+        log(f"{code}: figures in {directory / 'figures'}")
+    return references, read_metrics(directory) if current else None
+
+
+#: Posterior draws the main job's metrics, ranking and recommendation read.
+REPORT_DRAWS = 100
+
+
+def report_results(
+    out_dir: str | Path, materials=BUNDLED_MATERIALS, *, n_draws: int = REPORT_DRAWS, log=print
+) -> dict:
     """Metrics, figures, ranking and ``index.md`` for the finished materials of ``out_dir``.
 
     Per material with a ``summary.json``: ``metrics.json`` (:func:`~peano_bayes.metrics.evaluate_result`, kept
     if written by this version: :func:`~peano_bayes.metrics.metrics_current`) and ``figures/``; across them:
     ``ranking.json``/``ranking.md``, ``figures/`` and ``index.md``.
     Returns the ranking (:func:`~peano_bayes.ranking.rank_materials`)."""
-    from .figures import cross_material_figures, material_figures
+    from .figures import cross_material_figures
     from .inference.results import load_result
-    from .metrics import evaluate_result, metrics_current, read_metrics
     from .ranking import failed_draw_counts, rank_materials, ranking_markdown
 
     out_dir = Path(out_dir)
@@ -907,21 +983,9 @@ def report_results(out_dir: str | Path, materials=BUNDLED_MATERIALS, *, n_draws:
     for code in finished:
         directory = out_dir / code
         summaries.append(json.loads((directory / "summary.json").read_text()))
-        references[code] = reference_models(directory, summaries[-1], log=log)
-        current = metrics_current(directory)
-        if not current:
-            log(f"{code}: Table 3 metrics from {n_draws} posterior draws ...")
-            try:
-                evaluate_result(directory, n_draws=n_draws, progress=False)
-                current = True
-            except PeanoBayesError as err:  # one material's metrics must not stop the others' report
-                log(f"{code}: no Table 3 metrics: {err}")
-        if current:
-            metrics[code] = read_metrics(directory)
-        if not (directory / "figures" / "corner.png").exists():
-            source = Path(summaries[-1]["dataset"])
-            material_figures(directory, load(source) if source.exists() else None)
-            log(f"{code}: figures in {directory / 'figures'}")
+        references[code], material_metrics = material_report(directory, summaries[-1], n_draws=n_draws, log=log)
+        if material_metrics is not None:
+            metrics[code] = material_metrics
         results[code] = load_result(directory)
     prior_only = {name for m in metrics.values() for name, s in m["summary"].items() if s["from_prior"]}
     pressures = {c: m.get("test_pressure_kpa") for c, m in metrics.items()}
@@ -941,12 +1005,16 @@ def report_results(out_dir: str | Path, materials=BUNDLED_MATERIALS, *, n_draws:
     return ranking or {}
 
 
-def _infer_unit(source: str, out_dir: str, label: str, kwargs: dict) -> dict:
+def _infer_unit(source: str, out_dir: str, label: str, kwargs: dict, report_draws: int | None = None) -> dict:
     """One dataset of a fan-out (:func:`run_bundled`, :func:`fit_many`): :func:`infer` into ``out_dir/label``,
     resumed from its sampler state if one is there (a unit re-run after its worker was lost continues from its
-    last saved chunk). Top level, so a worker process can import it."""
+    last saved chunk); with ``report_draws``, then its part of the report from that many draws
+    (:func:`material_report`), in the worker. Top level, so a worker process can import it."""
     resume = (Path(out_dir) / label / "sampler_state.npz").exists()
-    return infer(source, out_dir, label=label, resume=resume, **kwargs)
+    summary = infer(source, out_dir, label=label, resume=resume, **kwargs)
+    if report_draws is not None:
+        material_report(Path(out_dir) / label, summary, n_draws=report_draws, log=kwargs.get("log", print))
+    return summary
 
 
 def _can_continue(summary: dict, directory: Path, max_steps: int) -> bool:
@@ -974,7 +1042,14 @@ class RunLog:
 
 
 def _infer_all(
-    items: list[tuple[str, str]], out_dir: Path, *, jobs: int, scheduler: str | None, log, kwargs: dict
+    items: list[tuple[str, str]],
+    out_dir: Path,
+    *,
+    jobs: int,
+    scheduler: str | None,
+    log,
+    kwargs: dict,
+    report_draws: int | None = None,
 ) -> list[dict]:
     """:func:`infer` on each ``(label, data file)`` of ``items`` into ``out_dir/label`` as work units of
     :func:`~peano_bayes.fanout.run_units`, and the summaries in the order of ``items``. A label whose
@@ -1009,7 +1084,10 @@ def _infer_all(
         if executor is not None:
             unit_kwargs.update(progress=False, log=RunLog(out_dir / "run.log"))
             log(f"running {len(todo)} dataset(s) on {info.describe()}")
-        units = [Unit(label, _infer_unit, (str(source), str(out_dir), label, unit_kwargs)) for label, source in todo]
+        units = [
+            Unit(label, _infer_unit, (str(source), str(out_dir), label, unit_kwargs, report_draws))
+            for label, source in todo
+        ]
         outcomes = run_units(
             units,
             executor,
@@ -1051,8 +1129,10 @@ def run_bundled(
     out_dir.mkdir(parents=True, exist_ok=True)
     log = RunLog(out_dir / "run.log", log)
     items = [(code, str(bundled.dataset_path(code))) for code in materials]
-    ordered = _infer_all(items, out_dir, jobs=jobs, scheduler=scheduler, log=log, kwargs=kwargs)
-    report_results(out_dir, materials, log=log)
+    ordered = _infer_all(
+        items, out_dir, jobs=jobs, scheduler=scheduler, log=log, kwargs=kwargs, report_draws=REPORT_DRAWS
+    )
+    report_results(out_dir, materials, n_draws=REPORT_DRAWS, log=log)
     return ordered
 
 

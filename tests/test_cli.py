@@ -17,6 +17,7 @@ from peano_bayes.commands import COMMANDS
 from peano_bayes.data import load, save
 from peano_bayes.errors import PeanoBayesInputError
 from peano_bayes.inference.priors import load_prior
+from peano_bayes.inference.sample import SamplingInterrupted
 from peano_bayes.ranking import CRITERIA
 from peano_bayes.rig import RigSimulationError
 
@@ -127,6 +128,7 @@ def _fake_infer(outcome):
         (False, 3),  # finished, not converged
         (RigSimulationError("the solver missed its tolerance"), 1),  # a computation failed, not the input
         (KeyboardInterrupt(), 130),
+        (SamplingInterrupted("stopped at step 80; state saved in s.npz: run the same command with --resume"), 130),
         (PeanoBayesInputError("bad thing"), 2),
     ],
 )
@@ -141,6 +143,9 @@ def test_exit_status_of_each_outcome(own_muscle, tmp_path, capsys, monkeypatch, 
     else:  # the one JSON object says why it stopped
         assert json.loads(captured.out) == {"error": captured.err.strip().split(": ", 1)[1], "exit_status": status}
         assert "Traceback" not in captured.err
+        if isinstance(outcome, SamplingInterrupted):  # where the state is and how to go on
+            assert "interrupted: stopped at step 80; state saved in s.npz" in captured.err
+            assert "--resume" in captured.err
 
 
 def test_every_command_is_registered_once_with_help():

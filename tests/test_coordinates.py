@@ -13,6 +13,16 @@ from peano_bayes.inference.sample import sample
 from tests.test_sample import Gaussian
 
 
+def finite_difference_log_det(coords, z: np.ndarray, h: float) -> float:
+    """ln|det d theta / d z| at ``z`` (D,) by central differences of ``coords.to_theta``."""
+    jac = np.empty((z.size, z.size))
+    for col in range(z.size):
+        step = np.zeros(z.size)
+        step[col] = h
+        jac[:, col] = (coords.to_theta(z + step)[0][0] - coords.to_theta(z - step)[0][0]) / (2 * h)
+    return float(np.log(abs(np.linalg.det(jac))))
+
+
 def _coordinates(material: str) -> tuple[TensileStretch, object]:
     prior = prior_for(material).select([KA, KB])
     return sampler_coordinates(SimpleNamespace(prior=prior), "tensile_stretch"), prior
@@ -28,14 +38,8 @@ def test_tensile_stretch_round_trips_and_its_log_jacobian_matches_finite_differe
     np.testing.assert_allclose(np.exp(z[:, 1]) * ka + kb * np.exp(2 * z[:, 1]), 20.0, rtol=1e-9)  # d(20 N)
     back, log_jacobian = coords.to_theta(z)
     np.testing.assert_allclose(back, theta, rtol=1e-8, atol=1e-8)
-    h = 1e-5
     for k in range(theta.shape[0]):
-        jac = np.empty((2, 2))
-        for col in range(2):
-            step = np.zeros(2)
-            step[col] = h
-            jac[:, col] = (coords.to_theta(z[k] + step)[0][0] - coords.to_theta(z[k] - step)[0][0]) / (2 * h)
-        assert log_jacobian[k] == pytest.approx(np.log(abs(np.linalg.det(jac))), abs=1e-4)
+        assert log_jacobian[k] == pytest.approx(finite_difference_log_det(coords, z[k], 1e-5), abs=1e-4)
 
 
 def test_stretches_outside_the_wedge_have_no_density():
@@ -105,3 +109,47 @@ def test_a_resume_refuses_a_state_written_in_other_coordinates_and_says_which(tm
         sample(target, mean, 0.01 * np.eye(3), state_path=state, resume=True, coordinates=coords, **options)
     resumed = sample(target, mean, 0.01 * np.eye(3), state_path=state, resume=True, **options)
     assert resumed.resumed_from == 20
+
+
+def _with_contrasts(n_contrasts: int):
+    """A stub posterior: PR's tensile pair and the spread as population parameters, then ``n_contrasts``
+    contrasts."""
+    from peano_bayes.inference.posterior import SPECIMEN_SD
+
+    prior = prior_for("PR")
+    prior = prior.select([KA, KB, SPECIMEN_SD]) if SPECIMEN_SD in prior.names else None
+    assert prior is not None
+    names = tuple(f"specimen_contrast_x_{k + 1}" for k in range(n_contrasts))
+    return SimpleNamespace(prior=prior, n_contrasts=n_contrasts, contrast_names=names)
+
+
+def test_noncentred_contrasts_compose_with_the_stretches_round_trip_and_have_the_right_jacobian():
+    from peano_bayes.inference.coordinates import Composed, NonCentredContrasts
+
+    post = _with_contrasts(3)
+    coords = sampler_coordinates(post, "tensile_stretch", (True, False, True))
+    assert isinstance(coords, Composed) and isinstance(coords.inner, NonCentredContrasts)
+    rng = np.random.default_rng(9)
+    theta = np.column_stack([post.prior.sample(rng, 10), 0.05 * rng.normal(size=(10, 3))])
+    z = coords.to_sampler(theta)
+    tau = np.asarray(post.prior.marginals["specimen_log_sd"].from_unconstrained(theta[:, 2])[0])
+    np.testing.assert_allclose(z[:, 3], theta[:, 3] / tau)  # non-centred: in units of the spread
+    np.testing.assert_array_equal(z[:, 4], theta[:, 4])  # centred: as it is
+    back, log_jacobian = coords.to_theta(z)
+    np.testing.assert_allclose(back, theta, rtol=1e-8, atol=1e-10)
+    for k in range(theta.shape[0]):
+        assert log_jacobian[k] == pytest.approx(finite_difference_log_det(coords, z[k], 1e-6), abs=1e-4)
+    assert coords.describe()["parts"][1] == {"kind": "noncentred_contrasts", "noncentred": [True, False, True]}
+    with pytest.raises(ValueError, match="2 non-centring flags for 3 contrasts"):
+        sampler_coordinates(post, "theta", (True, False))
+
+
+def test_a_contrast_is_non_centred_where_the_data_pin_it_little_against_the_spread():
+    from peano_bayes.inference.coordinates import NONCENTRE_RATIO, choose_noncentred
+
+    post = _with_contrasts(2)
+    mode = np.zeros(5)
+    mode[2] = post.prior.marginals["specimen_log_sd"].to_unconstrained(0.1)  # spread 0.1 at the mode
+    cov = np.diag([0.1, 0.1, 0.1, (0.9 * NONCENTRE_RATIO * 0.1) ** 2, (1.1 * NONCENTRE_RATIO * 0.1) ** 2])
+    assert choose_noncentred(post, mode, cov) == (False, True)
+    assert choose_noncentred(SimpleNamespace(n_contrasts=0), mode, cov) == ()

@@ -15,11 +15,8 @@ from peano_bayes.inference.sample import (
     convergence,
     load_state,
     planned_chunk,
-    pooled,
-    proposal_at,
     sample,
     walker_count,
-    warmup_rounds,
 )
 
 
@@ -164,19 +161,6 @@ def test_proposal_from_stuck_walkers_is_still_usable():
     assert np.all(np.isfinite(new)) and np.all(np.isfinite(factor))
 
 
-def test_warmup_rounds_and_the_proposal_in_force():
-    assert warmup_rounds(0) == [0]
-    assert warmup_rounds(300) == [0, 100, 200, 300]
-    assert warmup_rounds(10) == [0, 4, 8, 10]
-    chain = np.random.default_rng(0).normal(size=(300, 8, 2))
-    assert proposal_at(chain, 99, 300) is None
-    p = proposal_at(chain, 250, 300)  # after round two (step 200): fitted to steps 100-199
-    np.testing.assert_allclose(p.mean, chain[100:200].reshape(-1, 2).mean(axis=0))
-    later = proposal_at(chain, 5000, 300)  # frozen after the warm-up: its second half, steps 150-299
-    np.testing.assert_allclose(later.mean, chain[150:300].reshape(-1, 2).mean(axis=0))
-    np.testing.assert_allclose(later.covariance, np.cov(chain[150:300].reshape(-1, 2).T))
-
-
 def test_a_step_limit_inside_the_warmup_says_so():
     g = Gaussian()
     result = sample(
@@ -215,16 +199,15 @@ def figures(tau, ess, discard):
 
 
 def test_the_next_chunk_is_what_tau_and_ess_say_is_missing():
-    # tau 20 after 1000 sampled steps (warm-up 300, discard 340): 52 tau = 1040 steps, plus a tenth: 1144, so
-    # 144 more.
-    assert planned_chunk(figures(20.0, 5000.0, 340), 1300, 300, 500) == 144
-    # Early on the chunk caps it: 1144 - 500 sampled = 644 > 500.
-    assert planned_chunk(figures(20.0, 5000.0, 340), 800, 300, 500) == 500
-    # ESS-bound: tau 2 (104 steps suffice), ESS 500 of 1000 on 400 kept steps of 500 sampled: 400 more kept
+    # tau 20 after 300 sampled steps (warm-up 300, discard 340): 22 tau = 440 steps, plus a tenth: 484, so 184.
+    assert planned_chunk(figures(20.0, 5000.0, 340), 600, 300, 500) == 184
+    # Early on the chunk caps it: tau 40, 968 - 300 sampled = 668 > 500.
+    assert planned_chunk(figures(40.0, 5000.0, 380), 600, 300, 500) == 500
+    # ESS-bound: tau 2 (44 steps suffice), ESS 500 of 1000 on 400 kept steps of 500 sampled: 400 more kept
     # steps, 900 sampled, a tenth more: 990, so 490.
     assert planned_chunk(figures(2.0, 500.0, 400), 800, 300, 1000) == 490
     # Nearly there: never fewer than MIN_CHUNK (50); tau undefined (a stuck walker): the whole chunk.
-    assert planned_chunk(figures(20.0, 5000.0, 340), 1440, 300, 500) == 50
+    assert planned_chunk(figures(20.0, 5000.0, 340), 780, 300, 500) == 50
     assert planned_chunk(figures(np.inf, 5000.0, 340), 1300, 300, 500) == 500
 
 
@@ -290,46 +273,6 @@ def test_too_few_walkers_for_the_dimension_is_an_input_error():
         walker_count(24, 14)
 
 
-def test_pooled_lays_each_ensembles_walkers_end_to_end():
-    chain = np.arange(3 * 4).reshape(3, 4)  # (steps, walkers): two ensembles of two walkers
-    np.testing.assert_array_equal(pooled(chain, 2), [[0, 4, 8, 1, 5, 9], [2, 6, 10, 3, 7, 11]])
-
-
-def test_rhat_compares_ensembles_and_catches_one_in_another_mode():
-    """Four ensembles of well-mixed walkers converge; shift one ensemble (stuck in its own mode) and R-hat,
-    computed between the ensembles' pooled walkers, refuses the run."""
-    rng = np.random.default_rng(5)
-    chain = rng.normal(size=(3000, 4 * 8, 2))
-    good = convergence(chain, ("x", "y"), n_ensembles=4)
-    assert good.converged, good.problems
-    chain[:, :8] += 0.5
-    bad = convergence(chain, ("x", "y"), n_ensembles=4)
-    assert not bad.converged and any("R-hat" in p for p in bad.problems)
-    assert np.all(bad.rhat > 1.01)
-
-
-def test_each_parameters_figures_are_arviz_on_its_own_pooled_walkers():
-    """R-hat and bulk/tail ESS per parameter equal arviz's on that parameter's walkers laid end to end per ensemble
-    (built here without ``pooled``), and land on the right name: the parameter shifted in one ensemble has the
-    largest R-hat, the autocorrelated one a far smaller ESS than the independent one."""
-    import arviz as az
-
-    rng = np.random.default_rng(7)
-    steps, per, n_ensembles = 1500, 8, 4
-    chain = rng.normal(size=(steps, n_ensembles * per, 3))
-    chain[:, :per, 2] += 0.3
-    for t in range(1, steps):  # AR(1), lag-1 0.9, in the second parameter
-        chain[t, :, 1] = 0.9 * chain[t - 1, :, 1] + np.sqrt(1 - 0.81) * chain[t, :, 1]
-    conv = convergence(chain, ("a", "b", "c"), n_ensembles=n_ensembles)
-    kept = chain[conv.discard :]
-    for i in range(3):
-        own = np.stack([kept[:, e * per : (e + 1) * per, i].T.reshape(-1) for e in range(n_ensembles)])
-        np.testing.assert_allclose(conv.rhat[i], az.rhat(own), rtol=1e-12)
-        np.testing.assert_allclose(conv.ess_bulk[i], az.ess(own, method="bulk"), rtol=1e-12)
-        np.testing.assert_allclose(conv.ess_tail[i], az.ess(own, method="tail"), rtol=1e-12)
-    assert np.argmax(conv.rhat) == 2 and conv.ess_bulk[1] < conv.ess_bulk[0] / 3
-
-
 def test_one_ensemble_never_certifies_convergence():
     chain = np.random.default_rng(6).normal(size=(3000, 32, 2))
     conv = convergence(chain, ("x", "y"), n_ensembles=1)
@@ -364,3 +307,202 @@ def test_main_job_continues_only_an_unconverged_material_with_kept_state_and_ste
     assert _can_continue(unconverged, tmp_path, 40000)
     assert not _can_continue(unconverged, tmp_path, 20000)  # the limit allows no more steps
     assert not _can_continue({"convergence": {"converged": True}, "steps": 5000}, tmp_path, 40000)
+
+
+# --- The convergence rule (nested R-hat across ensembles split in time, walker ESS, 20 stable tau) ---------
+
+
+def ar1(rng, rho: float, shape) -> np.ndarray:
+    """Stationary AR(1) draws of unit variance and lag-1 correlation ``rho`` along the first axis."""
+    x = rng.normal(size=shape)
+    for t in range(1, shape[0]):
+        x[t] = rho * x[t - 1] + np.sqrt(1 - rho**2) * x[t]
+    return x
+
+
+def test_a_stationary_run_of_four_ensembles_is_certified():
+    rng = np.random.default_rng(11)
+    chain = ar1(rng, 0.8, (600, 4 * 16, 3))  # tau = (1 + 0.8) / (1 - 0.8) = 9 steps
+    conv = convergence(chain, ("a", "b", "c"), n_ensembles=4, previous_tau=9.0)
+    assert conv.converged, conv.problems
+    assert np.all(conv.rhat < 1.005)
+    assert 6.0 < conv.tau_max < 12.0
+
+
+def test_a_run_whose_ensembles_drift_together_in_time_is_refused():
+    """Every walker's mean moves by 0.6 sd over the run, the same in all four ensembles. The former rule laid each
+    ensemble's walkers end to end and split that line in half (walkers against walkers, not early against late):
+    it saw no difference and certified this run. Nested R-hat splits each ensemble in time and refuses it."""
+    rng = np.random.default_rng(0)
+    chain = rng.normal(size=(3000, 4 * 8, 2)) + np.linspace(-0.3, 0.3, 3000)[:, None, None]
+    conv = convergence(chain, ("x", "y"), n_ensembles=4, previous_tau=1.5)
+    assert conv.tau_lengths > 50 and np.all(conv.ess_bulk > 1000)  # long and "well mixed" by every other test
+    assert not conv.converged
+    assert np.all(conv.rhat > 1.01) and any("R-hat" in p for p in conv.problems)
+
+
+def test_one_ensemble_stuck_in_a_second_mode_is_refused():
+    rng = np.random.default_rng(5)
+    chain = rng.normal(size=(800, 4 * 8, 2))
+    good = convergence(chain, ("x", "y"), n_ensembles=4, previous_tau=1.0)
+    assert good.converged, good.problems
+    chain[:, :8, 0] += 3.0  # ensemble 1 sits in a mode 3 sd away in x and never leaves it
+    bad = convergence(chain, ("x", "y"), n_ensembles=4, previous_tau=1.0)
+    assert not bad.converged and bad.rhat[0] > 1.1 and bad.rhat[1] < 1.01
+    assert any("R-hat misses its target for 1 parameter(s): x" in p for p in bad.problems)
+
+
+def test_a_different_spread_in_one_ensemble_is_seen_by_the_folded_rhat():
+    """Same mean, twice the sd in one ensemble: the rank-normalized R-hat of the draws barely moves; on the folded
+    draws ``|x - median|`` it refuses."""
+    from peano_bayes.inference.diagnostics import nested_rhat
+
+    rng = np.random.default_rng(3)
+    chain = rng.normal(size=(400, 4 * 16, 1))
+    chain[:, :16] *= 2.0
+    assert nested_rhat(chain, 4)[0] > 1.01
+
+
+def test_nested_rhat_is_the_published_formula():
+    """Against the definition of Margossian et al. (superchain means' variance over the mean within-superchain
+    variance, which adds the subchains' means' spread to their own), written out with loops, on raw (not
+    rank-normalized) draws of a case with unequal superchains."""
+    from peano_bayes.inference.diagnostics import _nested_ratio
+
+    rng = np.random.default_rng(2)
+    k, m, n = 3, 4, 7
+    x = rng.normal(size=(k, m, n, 1)) + np.arange(k)[:, None, None, None] * 0.5
+    chain_means = [[sum(x[a, b, :, 0]) / n for b in range(m)] for a in range(k)]
+    super_means = [sum(chain_means[a]) / m for a in range(k)]
+    grand = sum(super_means) / k
+    between = sum((s - grand) ** 2 for s in super_means) / (k - 1)
+    within = 0.0
+    for a in range(k):
+        b_tilde = sum((c - super_means[a]) ** 2 for c in chain_means[a]) / (m - 1)
+        w_tilde = sum(sum((v - chain_means[a][b]) ** 2 for v in x[a, b, :, 0]) / (n - 1) for b in range(m)) / m
+        within += (b_tilde + w_tilde) / k
+    np.testing.assert_allclose(_nested_ratio(x)[0], np.sqrt(1 + between / within), rtol=1e-12)
+
+
+def test_walker_ess_of_independent_and_of_ar1_draws_is_their_known_size():
+    """Independent draws: ESS is the number of draws; AR(1) with lag-1 0.8: ``N (1 - 0.8) / (1 + 0.8) = N / 9``
+    (each within 15 %); the tail ESS of independent draws likewise."""
+    from peano_bayes.inference.diagnostics import walker_ess
+
+    rng = np.random.default_rng(4)
+    white = rng.normal(size=(500, 32, 1))
+    bulk, tail = walker_ess(white)
+    np.testing.assert_allclose([bulk[0], tail[0]], 16000, rtol=0.15)
+    red = ar1(rng, 0.8, (2000, 32, 1))
+    np.testing.assert_allclose(walker_ess(red)[0][0], 64000 / 9, rtol=0.15)
+
+
+def test_tau_max_must_be_stable_between_two_checks():
+    rng = np.random.default_rng(8)
+    chain = ar1(rng, 0.8, (600, 4 * 16, 2))
+    first = convergence(chain, ("x", "y"), n_ensembles=4)
+    assert not first.converged and first.problems == ("tau_max not yet compared between two checks",)
+    grown = convergence(chain, ("x", "y"), n_ensembles=4, previous_tau=0.6 * first.tau_max)
+    assert not grown.converged and "tau_max changed by 40 %" in grown.problems[0]
+    steady = convergence(chain, ("x", "y"), n_ensembles=4, previous_tau=0.9 * first.tau_max)
+    assert steady.converged and steady.tau_change == pytest.approx(0.1)
+
+
+# --- The adaptive warm-up and dispersed starts -----------------------------------------------------------
+
+
+def test_the_warmup_ends_where_the_proposal_is_stable_and_not_before():
+    from peano_bayes.inference.sample import adapt, proposal_change, warmup_bounds
+
+    assert warmup_bounds(None, 1000) == [100, 200, 300, 450, 700, 1000]
+    assert warmup_bounds(250) == [100, 200, 250] and warmup_bounds(0) == []
+    rng = np.random.default_rng(0)
+    stationary = rng.normal(size=(700, 32, 3))
+    a = adapt(stationary, None)
+    assert a.end == 200 and a.stable and a.changes[0]["step"] == 200
+    assert a.proposal_at(5000) is a.proposals[200] and a.proposal_at(99) is None
+    np.testing.assert_allclose(a.proposals[200].mean, stationary[100:200].reshape(-1, 3).mean(axis=0))
+    # Walkers still contracting from a wide start (sd 4 -> 1 with a 150-step time constant): not stable until
+    # the spread has settled, then it ends.
+    scale = 1.0 + 3.0 * np.exp(-np.arange(1100) / 150.0)
+    contracting = rng.normal(size=(1100, 32, 3)) * scale[:, None, None]
+    b = adapt(contracting, None)
+    assert b.changes[0]["scale"] > 0.2 and b.end is not None and b.end >= 450 and b.stable
+    # A fixed warm-up ends where it is told; an unfinished adaptive one has no end yet.
+    assert adapt(contracting, 200).end == 200 and not adapt(contracting, 200).stable
+    assert adapt(contracting[:150], None).end is None
+    # The change is symmetric in what it measures: a proposal against itself has not moved.
+    p = a.proposals[100]
+    assert proposal_change(p, p) == {"scale": pytest.approx(0.0, abs=1e-12), "centre": 0.0}
+
+
+def test_each_ensemble_starts_from_its_own_centre():
+    from peano_bayes.inference.sample import CENTRE_SPREAD, ensemble_centres
+
+    g = Gaussian()
+    cov = 0.04 * np.eye(3)
+    centres = ensemble_centres(g, g.mean, cov, 4, seed=1)
+    assert centres.shape == (4, 3) and len({tuple(c) for c in centres}) == 4
+    distance = np.linalg.norm((centres - g.mean) / 0.2, axis=1)  # in the approximation's sd
+    assert np.all(distance > 0.3) and np.all(distance < 4 * CENTRE_SPREAD * np.sqrt(3))
+    optima = np.array([[0.0, 0.0, 0.0], [2.0, -1.0, 0.0]])
+    with_optima = ensemble_centres(g, g.mean, cov, 4, seed=1, optima=optima)
+    np.testing.assert_array_equal(with_optima[:2], optima)
+    np.testing.assert_array_equal(with_optima[2:], centres[2:])  # the same draws for the rest
+
+
+def test_a_run_reports_its_adaptive_warmup_and_checks():
+    g = Gaussian()
+    result = sample(g, g.mean, 0.05 * np.eye(3), n_walkers=8, seed=2, max_steps=5000, progress=False,
+                    log=lambda m: None)  # fmt: skip
+    assert result.convergence.converged
+    assert result.warmup in (200, 300, 450, 700) and result.warmup_stable
+    assert [c["step"] for c in result.warmup_changes][-1] == result.warmup
+    assert len(result.checks) >= 2 and result.checks[-1][0] == result.chain.shape[0]
+    assert result.convergence.discard > result.warmup
+
+
+# --- Interruption and progress ---------------------------------------------------------------------------
+
+
+class Interrupting(Gaussian):
+    """The Gaussian, which sends itself SIGINT (Ctrl-C) inside its ``calls``-th density evaluation."""
+
+    def __init__(self, calls: int):
+        self.calls, self.seen = calls, 0
+
+    def batched(self, thetas):
+        import os
+        import signal
+
+        self.seen += 1
+        if self.seen == self.calls:
+            os.kill(os.getpid(), signal.SIGINT)
+        return super().batched(thetas)
+
+
+def test_ctrl_c_stops_after_the_step_saves_the_state_and_resumes(tmp_path, capsys):
+    from peano_bayes.inference.sample import SamplingInterrupted
+
+    kw = dict(n_walkers=8, seed=4, warmup=50, chunk=60, max_steps=170, progress=False, log=lambda m: None)
+    whole = sample(Gaussian(), Gaussian.mean, 0.05 * np.eye(3), **kw)
+    state = tmp_path / "state.npz"
+    # The signal lands in the 251st density call, inside the warm-up's first round.
+    with pytest.raises(SamplingInterrupted, match=r"stopped at step \d+; state saved in .*--resume") as stop:
+        sample(Interrupting(251), Gaussian.mean, 0.05 * np.eye(3), state_path=state, **kw)
+    stopped = int(str(stop.value).split("step ")[1].split(";")[0])
+    assert "Traceback" not in capsys.readouterr().err  # emcee printed nothing of the walkers
+    assert 0 < stopped < 50 and load_state(state)[0].shape[0] == stopped  # saved at the step it stopped after
+    rest = sample(Gaussian(), Gaussian.mean, 0.05 * np.eye(3), state_path=state, resume=True, **kw)
+    np.testing.assert_array_equal(rest.chain, whole.chain)  # the uninterrupted run, bit for bit
+
+
+def test_without_a_terminal_progress_is_one_line_per_check(capsys):
+    g = Gaussian()
+    lines = []
+    sample(g, g.mean, 0.05 * np.eye(3), n_walkers=8, seed=2, max_steps=400, progress=True, log=lines.append)
+    assert "\r" not in capsys.readouterr().err  # pytest's stderr is no terminal: no bars
+    checks = [line for line in lines if line.startswith("sampling step")]
+    assert checks and all("tau_max" in c and "R-hat" in c and "ESS" in c for c in checks)
+    assert all("ETA" in c or "converged" in c for c in checks)
+    assert any(line.startswith("warm-up step 200") for line in lines)

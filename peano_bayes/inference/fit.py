@@ -85,7 +85,9 @@ class FitResult:
     at most ``max_steps`` steps ran;
     ``start_costs`` (n_starts,) of the last round (inf where failed); ``noise`` the weighting noise scales;
     ``noise_estimate`` noise scales re-estimated from the residuals; ``quality`` per test: RMSE, max |error|
-    and R^2 of the observed signal; ``seconds`` wall time (compile included).
+    and R^2 of the observed signal; ``seconds`` wall time (compile included); ``optima`` other local optima the
+    starts converged to (:func:`distinct_optima`), name -> value [SI] each, best first: where the sampler's
+    independently started ensembles begin.
     """
 
     names: tuple[str, ...]
@@ -103,6 +105,7 @@ class FitResult:
     seconds: float = 0.0
     converged: bool | None = None
     rounds: int = 1
+    optima: tuple[dict, ...] = ()
 
 
 def _prior_spread(prior: Prior, seed: int) -> jnp.ndarray:
@@ -316,6 +319,33 @@ def _noise_from_residuals(observations: Observations, predicted) -> dict:
     return {k: float(np.sqrt(np.mean(np.concatenate(v)))) for k, v in sums.items()}
 
 
+#: A converged start is another optimum when its cost (half the sum of squared whitened residuals, i.e. minus
+#: the log likelihood up to a constant) is within OPTIMUM_COST_PER_PARAMETER x d of the best, so that it can
+#: hold posterior mass comparable to the best's (a Gaussian peak's mass scales with its height times its
+#: volume, and d parameters' volumes can differ by that order), and lies more than OPTIMUM_DISTANCE Laplace
+#: standard deviations (Mahalanobis, at the best) from the best and from every optimum already taken.
+OPTIMUM_COST_PER_PARAMETER = 1.0
+OPTIMUM_DISTANCE = 3.0
+
+
+def distinct_optima(values: np.ndarray, costs: np.ndarray, converged: np.ndarray, covariance: np.ndarray,
+                    best: np.ndarray, best_cost: float) -> list[int]:  # fmt: skip
+    """Indices into ``values`` (n, d) of the starts that reached optima other than ``best`` (d,): converged,
+    cost within ``OPTIMUM_COST_PER_PARAMETER d`` of ``best_cost``, and each more than :data:`OPTIMUM_DISTANCE`
+    from the best and from the others already taken (Mahalanobis in ``covariance`` (d, d)); cheapest first."""
+    d = values.shape[1]
+    whiten = np.linalg.pinv(np.linalg.cholesky(covariance + 1e-12 * np.eye(d)))
+    taken = [np.asarray(best)]
+    out = []
+    for i in np.argsort(costs):
+        if not (converged[i] and np.isfinite(costs[i]) and costs[i] <= best_cost + OPTIMUM_COST_PER_PARAMETER * d):
+            continue
+        if all(np.linalg.norm(whiten @ (values[i] - t)) > OPTIMUM_DISTANCE for t in taken):
+            taken.append(values[i])
+            out.append(int(i))
+    return out
+
+
 def fit(
     observations: Observations,
     prior: Prior,
@@ -391,6 +421,8 @@ def fit(
     cost, u, jac, predicted, best_converged = best
     covariance = np.linalg.pinv(jac.T @ jac)
     params = {k: float(v) for k, v in {**fixed, **prior.from_unconstrained(u)}.items()}
+    others = distinct_optima(values, costs, converged & ~failed, covariance, u, cost)
+    optima = tuple({k: float(v) for k, v in prior.from_unconstrained(values[i]).items()} for i in others)
     return FitResult(
         names=prior.names,
         u=u,
@@ -402,6 +434,7 @@ def fit(
         n_step_limit=int(np.sum(~failed & ~converged)),
         converged=best_converged,
         rounds=rounds,
+        optima=optima,
         start_costs=costs,
         noise=noise,
         noise_estimate=_noise_from_residuals(observations, predicted),
@@ -417,6 +450,7 @@ __all__ = [
     "NOISE_CONSISTENCY_SE",
     "QUIET_TESTS",
     "dense_jacobian",
+    "distinct_optima",
     "fit",
     "fit_quality",
     "lag1_effective_size",

@@ -1,88 +1,96 @@
 """Ensemble MCMC (emcee) over a :class:`~peano_bayes.inference.posterior.Posterior`, in resumable chunks.
 
 One jit+vmap log posterior is handed to emcee with ``vectorize=True`` (emcee's red-blue moves evaluate half
-ensembles, so it compiles for two batch sizes). A run is :data:`~peano_bayes.defaults.DEFAULT_ENSEMBLES`
-independent ensembles, each started from its own overdispersed draws around the Laplace approximation of the
-posterior mode, and advanced chunk by chunk side by side. Each ensemble has two phases:
+ensembles, so it compiles for one batch size). A run is :data:`~peano_bayes.defaults.DEFAULT_ENSEMBLES`
+independent ensembles advanced step by step side by side, each **started from its own point**
+(:func:`ensemble_centres`: distinct least-squares optima where the caller has them, otherwise draws of the
+Laplace approximation widened :data:`CENTRE_SPREAD` times, so that an ensemble that lands in a mode the least
+squares missed stays apart and R-hat sees it). Each run has two phases:
 
-- **Warm-up** (``warmup`` steps in :data:`WARMUP_ROUNDS` rounds, discarded): the first round uses the
-  differential-evolution mix :data:`MOVES`; after each round a multivariate-t independence proposal
-  (:class:`IndependenceProposal`) is fitted to the second half of the walker positions so far and joins the
-  mix (:data:`ADAPTED_MOVES`) for the next round. Each fitted proposal depends only on the chain, so a resumed
-  run rebuilds it exactly.
-- **Sampling**: the last proposal is frozen (the kernel no longer changes, so every move leaves the posterior
-  invariant: the independence move is a Metropolis-Hastings step with its Hastings factor) and the run
-  proceeds in chunks of at most ``chunk`` steps, each as long as the current autocorrelation time and ESS
-  say is still missing (:func:`planned_chunk`), until
-
-  - the kept chain (after the warm-up and a further ``2 tau_max``) is at least ``50 tau_max`` long (emcee's
-    own reliability rule for its integrated autocorrelation time ``tau``),
-  - R-hat <= 1.01 across the ensembles and bulk and tail ESS >= 1000 for every parameter (arviz, on the kept
-    draws, each ensemble's walkers pooled into one chain: the walkers of one ensemble move together and are
-    not the independent chains R-hat assumes),
-
-  or until ``max_steps``; a run stopped by the limit is returned with ``converged=False``.
+- **Warm-up** (discarded), as long as it needs: the first :data:`WARMUP_BOUNDS` round uses the
+  differential-evolution mix :data:`MOVES`; at each later bound a multivariate-t independence proposal
+  (:class:`IndependenceProposal`) is fitted to the second half of *all* ensembles' walker positions so far and
+  joins the mix (:data:`ADAPTED_MOVES`). The warm-up ends at the first bound where the proposal's scale and
+  centre are stable against the previous fit (:func:`proposal_change`, :data:`STABLE`), or at ``max_warmup``
+  (then the result says the proposal never settled). A fixed ``warmup`` ends it there instead. Each fit
+  depends only on the chain, so a resumed run rebuilds the proposals and the warm-up's end exactly
+  (:func:`adapt`).
+- **Sampling**: the last proposal is frozen (every move then leaves the posterior invariant: the independence
+  move is a Metropolis-Hastings step with its Hastings factor) and the run proceeds in chunks, each as long as
+  the current autocorrelation time and ESS say is still missing (:func:`~.diagnostics.planned_chunk`), until
+  the rule of :mod:`~.diagnostics` certifies it (nested R-hat across the ensembles split in time, bulk and tail
+  ESS, at least 20 ``tau_max`` kept with ``tau_max`` stable between two checks), or until ``max_steps``; a run
+  stopped by the limit is returned with ``converged=False``.
 
 Why the independence move: the affine-invariant DE moves handle linear correlation but diffuse slowly in a
-10-15 dimensional posterior (tau 57 steps on the bundled TP data even from the posterior mode); a global
-proposal shaped like the posterior decorrelates a walker in one accepted step wherever the posterior is
-close to elliptical, and the DE moves keep exploring where it is not (see :data:`ADAPTED_MOVES`).
+10-20 dimensional posterior; a global proposal shaped like the posterior decorrelates a walker in one accepted
+step wherever the posterior is close to elliptical, and the DE moves keep exploring where it is not.
 
-After every warm-up round and chunk the whole state (chain, log posterior, RNG state per ensemble) is written
-atomically to
-``state_path``; with ``resume=True`` a run continues from it, and because the RNG state is restored it gives
-the same numbers as a run that was never interrupted.
+After every warm-up round and chunk the whole state (chain, log posterior, RNG state per ensemble, the checks so
+far) is written atomically to ``state_path``; with ``resume=True`` a run continues from it with the same numbers
+as a run that was never interrupted. Ctrl-C (SIGINT, in the main thread) stops the run after the step under way,
+saves the state at that step and raises :class:`SamplingInterrupted`.
+
+Progress: with ``progress`` and a terminal on stderr, a bar per chunk; otherwise (a log file, a worker) one
+``log`` line per warm-up bound and per check (step, tau, R-hat, ESS, the time still expected).
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import io
 import json
 import os
+import signal
+import sys
+import threading
 import time
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
 
-import arviz as az
 import emcee
 import numpy as np
 from scipy import special
 
 from ..atomic import write_bytes
-from ..defaults import DEFAULT_CHUNK, DEFAULT_ENSEMBLES, DEFAULT_MAX_STEPS, DEFAULT_WARMUP
+from ..defaults import DEFAULT_CHUNK, DEFAULT_ENSEMBLES, DEFAULT_MAX_STEPS, DEFAULT_MAX_WARMUP, DEFAULT_WARMUP
 from ..errors import PeanoBayesError, PeanoBayesInputError
 from .coordinates import Identity
+from .diagnostics import MIN_CHUNK, MIN_ENSEMBLES, TARGETS, Convergence, convergence, missing_steps, planned_chunk
 from .posterior import Posterior
 
-#: Convergence targets: chains of at least 50 integrated autocorrelation times, rank-normalized split R-hat
-#: across the ensembles <= 1.01, bulk and tail ESS >= 1000 for every parameter.
-TARGETS = {"min_tau_lengths": 50.0, "max_rhat": 1.01, "min_ess_bulk": 1000.0, "min_ess_tail": 1000.0}
-#: Fewest independently started ensembles whose comparison (R-hat) can certify convergence.
-MIN_ENSEMBLES = 4
-#: Each ensemble starts from N(centre, (START_INFLATION sd)^2): overdispersed against the Laplace
-#: approximation, so an ensemble that cannot leave its start shows in R-hat.
-START_INFLATION = 2.0
+#: Version of the sampler's state file and rule; a state saved under another is refused on resume.
+STATE_VERSION = 2
+#: Each ensemble's centre is drawn from N(mode, (CENTRE_SPREAD sd)^2) of the Laplace approximation, and its
+#: walkers from N(centre, (WALKER_SPREAD sd)^2) around it. A draw of the approximation itself lies about
+#: sqrt(D) Mahalanobis units from the mode; centres twice as far apart put each ensemble in its own region, so
+#: a mode within that reach that the least squares missed can hold one ensemble apart from the others, which
+#: nested R-hat then refuses. Each walker's marginal spread, sqrt(2^2 + 1) = 2.2 sd, is near the former
+#: common start's 2 sd, so the warm-up's way in is about as long.
+CENTRE_SPREAD = 2.0
+WALKER_SPREAD = 1.0
 #: Moves before any proposal is fitted (emcee's recommended differential-evolution mix).
 MOVES = ((emcee.moves.DEMove, 0.8), (emcee.moves.DESnookerMove, 0.2))
 #: Weights once the independence proposal is fitted: DE, snooker, independence. The independence move
-#: decorrelates a walker in one accepted step where the posterior is near elliptical (on PR, with the proposal
-#: of :func:`proposal_at`, tau_max 16.2 over 500 steps against 18.0 with weight 0.3); the DE moves carry back
+#: decorrelates a walker in one accepted step where the posterior is near elliptical; the DE moves carry back
 #: walkers from the tails, where the ellipse under-covers and an independence-only kernel gets stuck.
 ADAPTED_MOVES = (0.4, 0.1, 0.5)
-#: Degrees of freedom of the fitted multivariate-t proposal. On PR the independence move's acceptance, against
-#: posterior draws, was 0.41 with df 5 and 0.55 with df 20 for one proposal (100: 0.67 for one fitted to
-#: 68,000 draws, so the posterior is close to Gaussian); df 20 keeps some margin for heavier tails.
+#: Degrees of freedom of the fitted multivariate-t proposal: heavier tails than the near-Gaussian posterior keep
+#: some margin (on PR the move's acceptance against posterior draws was 0.41 with df 5 and 0.55 with df 20).
 PROPOSAL_DF = 20.0
 #: Smallest eigenvalue of a fitted proposal's scale matrix, relative to its largest.
 EIGENVALUE_FLOOR = 1e-8
-#: Warm-up rounds; the proposal is refitted after each.
-WARMUP_ROUNDS = 3
-#: Fewest steps of a sampling chunk (see :func:`planned_chunk`): each chunk ends in a convergence check.
-MIN_CHUNK = 50
-
-
+#: Step bounds at which the warm-up refits its proposal: rounds that grow by half, so that each fit rests on
+#: more draws than the last and the noise in a stable proposal's refit shrinks as the warm-up lengthens.
+WARMUP_BOUNDS = (100, 200, 300, 450, 700, 1050, 1600, 2400, 3600, 5400, 8100)
+#: The warm-up ends where a refit proposal differs from the previous fit by at most these: ``scale`` the largest
+#: relative change of its standard deviation along any direction, ``centre`` the shift of its mean in sd units
+#: (Mahalanobis) of the new fit.
+STABLE = {"scale": 0.2, "centre": 0.3}
+#: First sampling chunk [steps] before any autocorrelation time is known (capped by ``chunk``).
+FIRST_CHUNK = 100
 @dataclass(frozen=True, eq=False)
 class IndependenceProposal:
     """Multivariate-t independence proposal for emcee's :class:`emcee.moves.MHMove`: ``mean`` (D,),
@@ -149,174 +157,104 @@ def moves_for(proposal: IndependenceProposal | None) -> list:
     ]
 
 
-def warmup_rounds(warmup: int) -> list[int]:
-    """Step boundaries ``[0, r, 2r, ..., warmup]`` of the warm-up rounds (no rounds when ``warmup`` is 0)."""
-    if warmup <= 0:
-        return [0]
-    size = int(np.ceil(warmup / WARMUP_ROUNDS))
-    return sorted({*range(0, warmup, size), warmup})
+def warmup_bounds(warmup: int | None, max_warmup: int = DEFAULT_MAX_WARMUP) -> list[int]:
+    """Step bounds at which the proposal is refitted: :data:`WARMUP_BOUNDS` up to ``max_warmup`` (which is one),
+    or, for a fixed ``warmup``, the bounds below it and ``warmup`` itself (none for 0)."""
+    limit = max_warmup if warmup is None else warmup
+    if limit <= 0:
+        return []
+    return [b for b in WARMUP_BOUNDS if b < limit] + [limit]
 
 
-def proposal_at(chain: np.ndarray, step: int, warmup: int) -> IndependenceProposal | None:
-    """The proposal in force at ``step`` of a run with ``warmup`` steps of warm-up: fitted to the second half
-    of the chain up to the end of the last warm-up round finished by then (the first half is the way in from
-    the overdispersed start), or ``None`` before the first round ends. The sampling phase's proposal thus sees
-    the last half of the warm-up: on PR (with the former 300-step warm-up), 150 steps x 34 walkers gave an
-    acceptance of 0.50 where the last round's second half (50 steps) gave 0.30."""
-    bounds = warmup_rounds(warmup)
-    finished = [b for b in bounds[1:] if b <= step]
-    if not finished:
-        return None
-    end = finished[-1]
-    half = chain[end // 2 : end]
+def fit_proposal(chain: np.ndarray, bound: int) -> IndependenceProposal:
+    """The proposal fitted at ``bound``: to the second half of every walker's positions up to it (the first half
+    is the way in from the dispersed starts), all ensembles pooled."""
+    half = chain[bound // 2 : bound]
     return IndependenceProposal.fit(half.reshape(-1, chain.shape[-1]))
 
 
-@dataclass(frozen=True, eq=False)
-class Convergence:
-    """Figures of a run of ``n_ensembles`` ensembles: ``tau`` (D,) integrated autocorrelation time [steps], the
-    largest over the ensembles; ``discard`` burn-in [steps]; ``tau_lengths`` kept length over ``tau_max``;
-    ``rhat``/``ess_bulk``/``ess_tail`` (D,) on the kept draws, each ensemble's walkers pooled into one chain;
-    ``converged`` whether every target of :data:`TARGETS` holds; ``problems`` what misses, in words."""
-
-    tau: np.ndarray
-    discard: int
-    tau_lengths: float
-    rhat: np.ndarray
-    ess_bulk: np.ndarray
-    ess_tail: np.ndarray
-    converged: bool
-    problems: tuple[str, ...]
-    n_ensembles: int = 1
-
-    def as_dict(self, names) -> dict:
-        per = lambda a: {n: float(v) for n, v in zip(names, a, strict=True)}  # noqa: E731
-        return {
-            "converged": self.converged,
-            "problems": list(self.problems),
-            "n_ensembles": self.n_ensembles,
-            "discard_steps": self.discard,
-            "tau_steps": per(self.tau),
-            "tau_lengths": self.tau_lengths,
-            "rhat": per(self.rhat),
-            "ess_bulk": per(self.ess_bulk),
-            "ess_tail": per(self.ess_tail),
-            "targets": dict(TARGETS),
-        }
+def proposal_change(old: IndependenceProposal, new: IndependenceProposal) -> dict[str, float]:
+    """How far ``new`` moved from ``old``: ``scale``, the largest relative change of the standard deviation along
+    any direction (from the eigenvalues of ``old``'s covariance whitened by ``new``'s), and ``centre``, the
+    Mahalanobis distance between the means in ``new``'s metric."""
+    chol = np.linalg.cholesky(new.covariance)
+    whitened = np.linalg.solve(chol, np.linalg.solve(chol, old.covariance).T)
+    ratios = np.sqrt(np.clip(np.linalg.eigvalsh(0.5 * (whitened + whitened.T)), 0.0, None))
+    scale = float(np.max(np.abs(ratios - 1.0)))
+    centre = float(np.linalg.norm(np.linalg.solve(chol, old.mean - new.mean)))
+    return {"scale": scale, "centre": centre}
 
 
 @dataclass(frozen=True, eq=False)
-class SampleResult:
-    """``chain`` (steps, walkers, D) theta, the ensembles' walkers side by side (ensemble ``e`` holds walkers
-    ``e W`` to ``(e + 1) W - 1``); ``log_prob`` (steps, walkers); ``convergence``; ``names``; ``seconds`` of
-    sampling (this process, compile included); ``acceptance`` mean fraction; ``resumed_from`` steps loaded from
-    the state file (0 for a fresh run); ``n_ensembles``; ``warmup`` steps of warm-up the run used."""
+class Adaptation:
+    """The warm-up as far as a chain shows it (:func:`adapt`): ``proposals`` bound -> proposal fitted there;
+    ``changes`` one row per bound after the first (``step``, ``scale``, ``centre``); ``end`` the step the
+    warm-up ended at, ``None`` while it goes on; ``stable`` whether it ended on a stable proposal (a fixed
+    warm-up ends where it is told, stable or not)."""
 
-    names: tuple[str, ...]
-    chain: np.ndarray
-    log_prob: np.ndarray
-    convergence: Convergence
-    seconds: float
-    acceptance: float
-    resumed_from: int = 0
-    chunks: list = field(default_factory=list)
-    n_ensembles: int = 1
-    warmup: int = 0
+    proposals: dict[int, IndependenceProposal]
+    changes: list[dict]
+    end: int | None
+    stable: bool
 
-    def kept(self) -> np.ndarray:
-        """(walkers, draws, D) after burn-in."""
-        return self.chain[self.convergence.discard :].swapaxes(0, 1)
+    def proposal_at(self, step: int) -> IndependenceProposal | None:
+        """The proposal in force at ``step``: the last fitted at a bound <= ``step``, frozen after the end."""
+        limit = step if self.end is None else min(step, self.end)
+        fitted = [b for b in self.proposals if b <= limit]
+        return self.proposals[max(fitted)] if fitted else None
 
 
-def pooled(chain: np.ndarray, n_ensembles: int) -> np.ndarray:
-    """(n_ensembles, walkers_per_ensemble * steps, ...) from ``chain`` (steps, walkers, ...): each ensemble's
-    walkers laid end to end as one chain (the unit R-hat compares: walkers of one ensemble are not independent
-    chains, Foreman-Mackey on emcee issue 183)."""
-    steps, walkers = chain.shape[:2]
-    per = walkers // n_ensembles
-    rest = chain.shape[2:]
-    split = chain.reshape((steps, n_ensembles, per) + rest)
-    return np.moveaxis(split, 0, 2).reshape((n_ensembles, per * steps) + rest)
+def adapt(chain: np.ndarray, warmup: int | None, max_warmup: int = DEFAULT_MAX_WARMUP) -> Adaptation:
+    """Replay the warm-up on ``chain`` (steps, walkers, D) in the sampler's coordinates: fit the proposal at every
+    bound the chain has reached and end the warm-up at the first bound (after the second) whose proposal is
+    stable against the one before (:data:`STABLE`), or at the last bound (``warmup`` if fixed, else
+    ``max_warmup``). A pure function of the chain, so a resumed run finds the same proposals and end."""
+    bounds = warmup_bounds(warmup, max_warmup)
+    proposals, changes, end, stable = {}, [], None, False
+    previous = None
+    for bound in bounds:
+        if bound > chain.shape[0]:
+            break
+        proposals[bound] = proposal = fit_proposal(chain, bound)
+        if previous is not None:
+            change = proposal_change(previous, proposal)
+            changes.append({"step": bound, **change})
+            stable = change["scale"] <= STABLE["scale"] and change["centre"] <= STABLE["centre"]
+            if warmup is None and stable:
+                end = bound
+                break
+        previous = proposal
+        if bound == bounds[-1]:
+            end = bound
+    if not bounds:
+        end, stable = 0, True
+    return Adaptation(proposals, changes, end, stable)
 
 
-def arviz_figures(data) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Rank-normalized split R-hat, bulk ESS and tail ESS, each (D,) in ``data``'s variable order, of an arviz
-    dataset of D variables (chains, draws): each figure computed once for all variables."""
-    return tuple(
-        np.array([float(figure[k]) for k in data.data_vars])
-        for figure in (az.rhat(data), az.ess(data, method="bulk"), az.ess(data, method="tail"))
-    )
+def _centre_draw(centre: np.ndarray, covariance: np.ndarray, scale: float, rng: np.random.Generator) -> np.ndarray:
+    return rng.multivariate_normal(centre, scale**2 * covariance, method="eigh")
 
 
-def convergence(chain: np.ndarray, names=None, start: int = 0, n_ensembles: int = 1) -> Convergence:
-    """Convergence figures of ``chain`` (steps, walkers, D) of ``n_ensembles`` independently started ensembles
-    after its first ``start`` steps (the warm-up) against :data:`TARGETS`; ``discard`` counts from the chain's
-    first step.
-
-    The autocorrelation time is emcee's, per ensemble (the largest is kept); R-hat (rank-normalized split, arviz)
-    compares the ensembles, each ensemble's walkers pooled into one chain; bulk and tail ESS are arviz's on the
-    same pooled chains. With one ensemble R-hat cannot compare ensembles: it is computed with the walkers as
-    chains and the run is never called converged."""
-    sampled = chain[start:]
-    steps, walkers, ndim = sampled.shape
-    per = walkers // n_ensembles
-    with np.errstate(invalid="ignore", divide="ignore"):  # a parameter no walker moved has no defined tau
-        taus = np.array(
-            [emcee.autocorr.integrated_time(sampled[:, e * per : (e + 1) * per], tol=0) for e in range(n_ensembles)]
-        )
-    stuck = ~np.all(np.isfinite(taus), axis=0)
-    tau = np.where(stuck, np.inf, np.max(np.where(np.isfinite(taus), taus, np.inf), axis=0))
-    tau_max = float(np.max(tau))
-    discard = min(int(np.ceil(2.0 * tau_max)), steps // 2) if np.isfinite(tau_max) else steps // 2
-    kept = sampled[discard:]
-    discard += start
-    chains = pooled(kept, n_ensembles) if n_ensembles > 1 else kept.swapaxes(0, 1)
-    draws = {f"p{i}": chains[..., i] for i in range(ndim)}
-    rhat, ess_bulk, ess_tail = arviz_figures(az.convert_to_dataset(draws))
-    names = list(names) if names is not None else list(draws)
-    lengths = (chain.shape[0] - discard) / tau_max
-    problems = []
-    if n_ensembles < MIN_ENSEMBLES:
-        problems.append(
-            f"{n_ensembles} ensemble(s): R-hat needs at least {MIN_ENSEMBLES} independently started ensembles"
-        )
-    if stuck.any():
-        which = ", ".join(names[i] for i in np.flatnonzero(stuck)[:4])
-        problems.append(f"autocorrelation time undefined (a walker never moved) for {which}")
-    if lengths < TARGETS["min_tau_lengths"]:
-        problems.append(f"chain is {lengths:.1f} autocorrelation times long (target {TARGETS['min_tau_lengths']:g})")
-    for label, values, bad in (
-        ("R-hat", rhat, ~(rhat <= TARGETS["max_rhat"])),
-        ("bulk ESS", ess_bulk, ~(ess_bulk >= TARGETS["min_ess_bulk"])),
-        ("tail ESS", ess_tail, ~(ess_tail >= TARGETS["min_ess_tail"])),
-    ):
-        if bad.any():
-            worst = ", ".join(f"{names[i]} {values[i]:.3g}" for i in np.flatnonzero(bad)[:4])
-            problems.append(f"{label} misses its target for {int(bad.sum())} parameter(s): {worst}")
-    return Convergence(tau, discard, lengths, rhat, ess_bulk, ess_tail, not problems, tuple(problems), n_ensembles)
-
-
-def planned_chunk(result: Convergence, steps: int, warmup: int, chunk: int, min_chunk: int = MIN_CHUNK) -> int:
-    """Steps for the next chunk of a run of ``steps`` steps (``warmup`` of them warm-up) that is not yet
-    converged (``result``): the steps its current autocorrelation time and ESS say are still missing, plus a
-    tenth (``tau`` estimates grow as a chain lengthens), between ``min_chunk`` and ``chunk``. A chain a few
-    steps short of its target then ends a few steps past it rather than up to ``chunk - 1`` past it (on PR,
-    tau 21, a 500-step chunk would overshoot by a third of the run). A pure function of the chain, so a
-    resumed run plans the same chunks."""
-    tau = float(np.max(result.tau))
-    if not np.isfinite(tau):
-        return chunk
-    sampled, kept = steps - warmup, max(steps - result.discard, 1)
-    by_tau = (TARGETS["min_tau_lengths"] + 2.0) * tau  # the kept length plus the 2 tau discarded
-    ess = min(
-        float(np.min(result.ess_bulk)) / TARGETS["min_ess_bulk"],
-        float(np.min(result.ess_tail)) / TARGETS["min_ess_tail"],
-    )
-    by_ess = sampled + kept * (1.0 / ess - 1.0) if ess > 0 else np.inf  # ESS grows with the kept length
-    missing = 1.1 * max(by_tau, by_ess) - sampled
-    if not np.isfinite(missing):
-        return chunk
-    return min(chunk, max(min_chunk, int(np.ceil(round(missing, 6)))))  # round: 1.1 * 900 is 990.0000000000001
+def ensemble_centres(
+    posterior: Posterior, centre: np.ndarray, covariance: np.ndarray, n_ensembles: int, seed: int, optima=None
+) -> np.ndarray:
+    """(n_ensembles, D) start centres in theta: ``optima`` (k, D), distinct least-squares optima, first (at most
+    ``n_ensembles`` of them), then draws of N(``centre``, (:data:`CENTRE_SPREAD` sd)^2) of ``covariance``, each
+    with a finite log posterior (a draw where it is not is replaced by one at half the spread, up to 20 times;
+    then ``centre`` itself)."""
+    given = [] if optima is None else [np.asarray(o, dtype=float) for o in optima][:n_ensembles]
+    out = list(given)
+    for e in range(len(given), n_ensembles):
+        rng = np.random.default_rng([seed, 2, e])
+        scale, point = CENTRE_SPREAD, np.asarray(centre, dtype=float)
+        for _ in range(20):
+            trial = _centre_draw(centre, covariance, scale, rng)
+            if np.isfinite(posterior.batched(trial[None])[0]):
+                point = trial
+                break
+            scale *= 0.5
+        out.append(point)
+    return np.array(out)
 
 
 def initial_walkers(
@@ -372,6 +310,7 @@ _STATE_KEYS = {
     "seed": "--seed",
     "warmup": "--warmup",
     "coordinates": "--coordinates",
+    "version": "sampler version (the state was saved by another version of peano-bayes: run without --resume)",
     "names": "sampled parameters",
 }
 
@@ -420,8 +359,8 @@ def load_state(path: str | os.PathLike):
 
 def walker_count(n_walkers: int | None, ndim: int) -> int:
     """Walkers per ensemble: ``n_walkers``, or by default ``max(32, 2 ndim + 2)``, rounded up to even (emcee's
-    red-blue halves). With 50 autocorrelation times required, 32 walkers already give an ESS near 1600 per
-    ensemble; more walkers only cost more per step."""
+    red-blue halves). At the rule's 20 autocorrelation times, four ensembles of 32 walkers give an ESS near
+    2500; more walkers only cost more per step."""
     n = n_walkers or max(32, 2 * ndim + 2)
     if n < 2 * ndim:
         raise PeanoBayesInputError(
@@ -438,6 +377,70 @@ def _ensemble_seed(seed: int, ensemble: int) -> int:
     return int(np.random.SeedSequence([seed, ensemble]).generate_state(1)[0])
 
 
+class SamplingInterrupted(KeyboardInterrupt):
+    """Ctrl-C stopped a run after a whole step; its state up to that step is saved (the message says where)."""
+
+
+@contextlib.contextmanager
+def _stop_on_interrupt():
+    """While active, SIGINT (Ctrl-C) sets the returned event instead of raising inside the density call (where
+    emcee would print every walker's position and a traceback); the run stops after the step under way. Outside
+    the main thread (a worker) signals cannot be caught, and the event is never set."""
+    event = threading.Event()
+    if threading.current_thread() is not threading.main_thread():
+        yield event
+        return
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: event.set())
+    try:
+        yield event
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _bar(progress: bool, total: int, desc: str):
+    """A tqdm bar on stderr when ``progress`` and stderr is a terminal, else ``None`` (a log reads one line per
+    check instead of a stream of carriage returns)."""
+    if not progress or not sys.stderr.isatty():
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, unit="step", leave=False)
+
+
+def _eta(seconds: float) -> str:
+    if not np.isfinite(seconds):
+        return "unknown"
+    return f"{seconds:.0f} s" if seconds < 120 else f"{seconds / 60:.0f} min"
+
+
+@dataclass(frozen=True, eq=False)
+class SampleResult:
+    """``chain`` (steps, walkers, D) theta, the ensembles' walkers side by side (ensemble ``e`` holds walkers
+    ``e W`` to ``(e + 1) W - 1``); ``log_prob`` (steps, walkers); ``convergence``; ``names``; ``seconds`` of
+    sampling (this process, compile included); ``acceptance`` mean fraction; ``resumed_from`` steps loaded from
+    the state file (0 for a fresh run); ``n_ensembles``; ``warmup`` steps of warm-up the run used;
+    ``warmup_stable`` whether its proposal had settled (:func:`adapt`); ``warmup_changes`` the proposal's change
+    at each bound; ``checks`` (steps, tau_max) of every convergence check."""
+
+    names: tuple[str, ...]
+    chain: np.ndarray
+    log_prob: np.ndarray
+    convergence: Convergence
+    seconds: float
+    acceptance: float
+    resumed_from: int = 0
+    chunks: list = field(default_factory=list)
+    n_ensembles: int = 1
+    warmup: int = 0
+    warmup_stable: bool = True
+    warmup_changes: list = field(default_factory=list)
+    checks: list = field(default_factory=list)
+
+    def kept(self) -> np.ndarray:
+        """(walkers, draws, D) after burn-in."""
+        return self.chain[self.convergence.discard :].swapaxes(0, 1)
+
+
 def sample(
     posterior: Posterior,
     centre: np.ndarray,
@@ -448,29 +451,34 @@ def sample(
     seed: int = 0,
     chunk: int = DEFAULT_CHUNK,
     max_steps: int = DEFAULT_MAX_STEPS,
-    warmup: int = DEFAULT_WARMUP,
+    warmup: int | None = DEFAULT_WARMUP,
+    max_warmup: int = DEFAULT_MAX_WARMUP,
     min_steps: int = 0,
+    optima=None,
     state_path: str | os.PathLike | None = None,
     resume: bool = False,
     progress: bool = True,
     log=print,
     coordinates=None,
 ) -> SampleResult:
-    """Run ``n_ensembles`` independent emcee ensembles of ``n_walkers`` walkers on ``posterior``, each started
-    from its own draws of N(``centre``, :data:`START_INFLATION`^2 ``covariance``) in theta space (overdispersed,
-    so that R-hat can reveal an ensemble stuck in its start): ``warmup`` steps of warm-up, then chunks of at
-    most ``chunk`` steps (:func:`planned_chunk`) until converged (:func:`convergence`) or ``max_steps`` in all
-    (see the module docstring); a converged run shorter than ``min_steps`` goes on, in chunks of at most
-    ``chunk``, to ``min_steps`` exactly (a reference run longer than the convergence rule needs).
-    ``n_walkers``: see :func:`walker_count`. ``log(message)`` reports each round and chunk. ``coordinates``
-    (default theta itself, :class:`~peano_bayes.inference.coordinates.Identity`): what the ensembles move (see
+    """Run ``n_ensembles`` independent emcee ensembles of ``n_walkers`` walkers on ``posterior`` (see the module
+    docstring), each started around its own centre (:func:`ensemble_centres` from ``centre`` (D,), ``covariance``
+    (D, D) and ``optima`` (k, D), theta): the warm-up (adaptive for ``warmup=None``, at most ``max_warmup``
+    steps; else exactly ``warmup``), then chunks of at most ``chunk`` steps until converged or ``max_steps`` in
+    all; a converged run shorter than ``min_steps`` goes on, in chunks of at most ``chunk``, to ``min_steps``
+    exactly (a reference run longer than the rule needs). ``n_walkers``: see :func:`walker_count`.
+    ``log(message)`` reports each warm-up bound and check. ``coordinates`` (default theta itself,
+    :class:`~peano_bayes.inference.coordinates.Identity`): what the ensembles move (see
     :mod:`~peano_bayes.inference.coordinates`); the state file holds those, while the result's chain, log
-    posterior and convergence figures are in theta."""
+    posterior and convergence figures are in theta. Raises :class:`SamplingInterrupted` on Ctrl-C, after
+    saving the state."""
     start_time = time.perf_counter()
     if chunk < 1:
         raise PeanoBayesInputError(f"chunk must be >= 1 step, got {chunk}")
     if min_steps > max_steps:
         raise PeanoBayesInputError(f"min_steps ({min_steps}) exceeds max_steps ({max_steps}); raise max_steps")
+    if warmup is not None and warmup < 0:
+        raise PeanoBayesInputError(f"warmup must be >= 0 steps or None (adaptive), got {warmup}")
     coordinates = Identity() if coordinates is None else coordinates
 
     def density(z):
@@ -486,17 +494,19 @@ def sample(
     per = walker_count(n_walkers, ndim)
     n_ensembles = max(1, int(n_ensembles))
     total = per * n_ensembles
-    warmup = max(0, int(warmup))
     state_path = Path(state_path) if state_path is not None else None
     meta = {
+        "version": STATE_VERSION,
         "names": list(posterior.names),
         "n_walkers": per,
         "n_ensembles": n_ensembles,
         "seed": seed,
-        "warmup": warmup,
+        "warmup": "adaptive" if warmup is None else int(warmup),
         "coordinates": coordinates.describe(),
     }
-    chain, lps = np.zeros((0, total, ndim)), np.zeros((0, total))
+    if warmup is None:
+        meta["max_warmup"] = int(max_warmup)
+    chain, lps, checks = np.zeros((0, total, ndim)), np.zeros((0, total)), []
     if resume and state_path is not None and state_path.exists():
         chain, lps, rng_states, saved = load_state(state_path)
         saved.setdefault("n_ensembles", 1)
@@ -507,6 +517,7 @@ def sample(
                 f"{state_path}: saved state is of another run: {'; '.join(differ)}; give the same options to "
                 "resume it, else delete it or run without --resume"
             )
+        checks = [list(c) for c in saved.get("checks", [])]
         states = [
             emcee.State(chain[-1, e * per : (e + 1) * per], log_prob=lps[-1, e * per : (e + 1) * per], random_state=r)
             for e, r in enumerate(rng_states)
@@ -514,80 +525,124 @@ def sample(
         log(f"resumed from {state_path} at step {chain.shape[0]}")
     else:
         states = []
+        centres = ensemble_centres(posterior, centre, covariance, n_ensembles, seed, optima)
         for e in range(n_ensembles):
-            walkers, lp0 = initial_walkers(posterior, centre, START_INFLATION**2 * covariance, per, seed, e)
+            walkers, lp0 = initial_walkers(posterior, centres[e], WALKER_SPREAD**2 * covariance, per, seed, e)
             walkers = coordinates.to_sampler(walkers)
             lp0 = lp0 + coordinates.to_theta(walkers)[1]
             random_state = np.random.RandomState(_ensemble_seed(seed, e)).get_state()
             states.append(emcee.State(walkers, log_prob=lp0, random_state=random_state))
     resumed_from = chain.shape[0]
-    accepted = 0.0
-    chunks = []
-    result = None
-    bounds = warmup_rounds(warmup)
-    while chain.shape[0] < max_steps:
-        done = chain.shape[0]
-        in_warmup = done < warmup
-        if result is None and done > warmup:  # resumed after a chunk: plan the next one as the run would have
-            result = convergence(as_theta(chain)[0], posterior.names, start=warmup, n_ensembles=n_ensembles)
-            if result.converged and done >= min_steps:
-                break
-        if in_warmup:
-            n = next(b for b in bounds if b > done) - done
-        else:
-            n = chunk if result is None or result.converged else planned_chunk(result, done, warmup, chunk)
-            if done < min_steps:  # a run lengthened to min_steps ends there exactly, converged on the way or not
-                n = min(n, min_steps - done)
-        n = min(n, max_steps - done)
-        t0 = time.perf_counter()
-        label = "warm-up" if in_warmup else "steps"
-        parts, part_lps, acceptance, random_states = [], [], [], []
-        for e in range(n_ensembles):
-            own = chain[:, e * per : (e + 1) * per]
-            sampler = emcee.EnsembleSampler(
-                per, ndim, density, vectorize=True, moves=moves_for(proposal_at(own, done, warmup))
-            )
-            desc = f"{label} {done}-{done + n}" + (f", ensemble {e + 1}/{n_ensembles}" if n_ensembles > 1 else "")
+    bounds = warmup_bounds(warmup, max_warmup)
+    accepted, chunks, result, step_s = 0.0, [], None, None
+
+    def check(steps: int, end: int) -> Convergence:
+        """The rule at ``steps`` against the last check before it; recorded in ``checks`` (replacing any later)."""
+        earlier = [c for c in checks if c[0] < steps]
+        figures = convergence(as_theta(chain)[0], posterior.names, start=end, n_ensembles=n_ensembles,
+                              previous_tau=earlier[-1][1] if earlier else None)  # fmt: skip
+        checks[:] = [*earlier, [steps, figures.tau_max]]
+        return figures
+
+    with _stop_on_interrupt() as interrupted:
+        while chain.shape[0] < max_steps:
+            done = chain.shape[0]
+            adaptation = adapt(chain, warmup, max_warmup)
+            end = adaptation.end
+            in_warmup = end is None or done < end
+            if not in_warmup and result is None and done > end:  # resumed after a chunk: its last check again
+                result = check(done, end)
+                if result.converged and done >= min_steps:
+                    break
+            if in_warmup:
+                n = next(b for b in bounds if b > done) - done
+            elif result is None:
+                n = min(chunk, FIRST_CHUNK)
+            else:
+                n = chunk if result.converged else planned_chunk(result, done, end, chunk)
+                if done < min_steps:  # a run lengthened to min_steps ends there exactly
+                    n = min(n, min_steps - done)
+            n = min(n, max_steps - done)
+            proposal = adaptation.proposal_at(done)
+            samplers = [
+                emcee.EnsembleSampler(per, ndim, density, vectorize=True, moves=moves_for(proposal))
+                for _ in range(n_ensembles)
+            ]
+            label = "warm-up" if in_warmup else "sampling"
+            bar = _bar(progress, n, f"{label} {done}-{done + n}")
+            t0 = time.perf_counter()
+            steppers = [s.sample(states[e], iterations=n) for e, s in enumerate(samplers)]
+            taken = 0
             try:
-                states[e] = sampler.run_mcmc(states[e], n, progress=progress, progress_kwargs={"desc": desc})
+                while taken < n and not interrupted.is_set():
+                    for e, stepper in enumerate(steppers):
+                        states[e] = next(stepper)
+                    taken += 1
+                    if bar is not None:
+                        bar.update(1)
             except ValueError as err:  # emcee refuses walkers that span fewer than ndim dimensions
                 if "condition number" not in str(err):
                     raise
                 raise PeanoBayesError(
-                    f"the {per} walkers of ensemble {e + 1} collapsed onto fewer than {ndim} dimensions at step "
+                    f"the {per} walkers of an ensemble collapsed onto fewer than {ndim} dimensions at step "
                     f"{done}: the data do not determine all {ndim} sampled parameters "
                     f"({', '.join(posterior.names)}); fit more tests or runs, or narrow the prior"
                 ) from None
-            parts.append(sampler.get_chain())
-            part_lps.append(sampler.get_log_prob())
-            acceptance.append(sampler.acceptance_fraction)
-            random_states.append(sampler.random_state)
-        chain = np.concatenate([chain, np.concatenate(parts, axis=1)])
-        lps = np.concatenate([lps, np.concatenate(part_lps, axis=1)])
-        accepted = float(np.mean(np.concatenate(acceptance)))
-        if state_path is not None:
-            _save_state(state_path, chain, lps, random_states, meta)
-        chunks.append(
-            {"steps": chain.shape[0], "seconds": time.perf_counter() - t0, "acceptance": accepted, "warmup": in_warmup}
-        )
-        if in_warmup:
-            log(f"warm-up step {chain.shape[0]} of {warmup}: acceptance {accepted:.2f}")
-            continue
-        result = convergence(as_theta(chain)[0], posterior.names, start=warmup, n_ensembles=n_ensembles)
-        log(
-            f"step {chain.shape[0]}: acceptance {accepted:.2f}, tau_max {np.max(result.tau):.1f}, "
-            f"{result.tau_lengths:.0f} tau long, max R-hat {np.max(result.rhat):.3f} ({n_ensembles} ensembles), "
-            f"min bulk ESS {np.min(result.ess_bulk):.0f}, min tail ESS {np.min(result.ess_tail):.0f}"
-            + ("" if result.converged else " (not yet converged)")
-        )
-        if result.converged and chain.shape[0] >= min_steps:
-            break
+            finally:
+                if bar is not None:
+                    bar.close()
+            chain = np.concatenate([chain, np.concatenate([s.get_chain() for s in samplers], axis=1)])
+            lps = np.concatenate([lps, np.concatenate([s.get_log_prob() for s in samplers], axis=1)])
+            accepted = float(np.mean(np.concatenate([s.acceptance_fraction for s in samplers])))
+            step_s = (time.perf_counter() - t0) / max(taken, 1)
+            steps = chain.shape[0]
+            if interrupted.is_set():
+                where = ""
+                if state_path is not None:
+                    _save_state(state_path, chain, lps, [s.random_state for s in samplers], {**meta, "checks": checks})
+                    where = f"; state saved in {state_path}: run the same command with --resume to continue"
+                raise SamplingInterrupted(f"stopped at step {steps}{where}")
+            chunks.append({"steps": steps, "seconds": step_s * taken, "acceptance": accepted, "warmup": in_warmup})
+            if in_warmup:
+                after = adapt(chain, warmup, max_warmup)
+                change = after.changes[-1] if after.changes and after.changes[-1]["step"] == steps else None
+                log(
+                    f"warm-up step {steps}: acceptance {accepted:.2f}"
+                    + (
+                        f", proposal sd changed {100 * change['scale']:.0f} %, centre moved {change['centre']:.2f} sd"
+                        if change
+                        else ""
+                    )
+                    + (
+                        f"; warm-up ends here ({'stable' if after.stable else 'proposal NOT stable: limit reached'})"
+                        if after.end == steps
+                        else ""
+                    )
+                )
+            else:
+                result = check(steps, end)
+                missing = 0.0 if result.converged else missing_steps(result, steps, end)
+                change = "" if result.tau_change is None else f" ({100 * result.tau_change:+.0f} %)"
+                log(
+                    f"sampling step {steps} (warm-up {end}): acceptance {accepted:.2f}, tau_max "
+                    f"{result.tau_max:.1f}{change}, {result.tau_lengths:.0f} tau kept, max R-hat "
+                    f"{np.max(result.rhat):.3f} ({n_ensembles} ensembles), min ESS bulk {np.min(result.ess_bulk):.0f}"
+                    f" tail {np.min(result.ess_tail):.0f}"
+                    + ("; converged" if result.converged else f"; ETA {_eta(max(missing, MIN_CHUNK) * step_s)}")
+                )
+            if state_path is not None:
+                _save_state(state_path, chain, lps, [s.random_state for s in samplers], {**meta, "checks": checks})
+            if result is not None and not in_warmup and result.converged and steps >= min_steps:
+                break
+    adaptation = adapt(chain, warmup, max_warmup)
+    end = adaptation.end
     theta_chain, log_jacobian = as_theta(chain)
-    if result is None and chain.shape[0] > warmup:  # resumed at or past the limit: the saved chain as it is
-        result = convergence(theta_chain, posterior.names, start=warmup, n_ensembles=n_ensembles)
+    if result is None and end is not None and chain.shape[0] > end:  # resumed at or past the limit
+        result = check(chain.shape[0], end)
     if result is None:  # the step limit came inside the warm-up: figures of its second half, never converged
         result = convergence(theta_chain, posterior.names, start=len(chain) // 2, n_ensembles=n_ensembles)
-        problems = (f"the step limit ({max_steps}) ended the run inside the warm-up ({warmup} steps)",)
+        limit = warmup if warmup is not None else f"adaptive, at most {max_warmup}"
+        problems = (f"the step limit ({max_steps}) ended the run inside the warm-up ({limit} steps)",)
         result = dataclasses.replace(result, converged=False, problems=problems + result.problems)
     return SampleResult(
         posterior.names,
@@ -599,29 +654,36 @@ def sample(
         resumed_from,
         chunks,
         n_ensembles,
-        warmup,
+        end if end is not None else (warmup if warmup is not None else chain.shape[0]),
+        adaptation.stable,
+        adaptation.changes,
+        checks,
     )
 
 
 __all__ = [
     "ADAPTED_MOVES",
-    "DEFAULT_MAX_STEPS",
+    "CENTRE_SPREAD",
     "MIN_ENSEMBLES",
     "MOVES",
-    "START_INFLATION",
-    "WARMUP_ROUNDS",
-    "IndependenceProposal",
+    "STABLE",
     "TARGETS",
+    "WARMUP_BOUNDS",
+    "WALKER_SPREAD",
+    "Adaptation",
     "Convergence",
-    "arviz_figures",
+    "IndependenceProposal",
     "SampleResult",
+    "SamplingInterrupted",
+    "adapt",
     "convergence",
+    "ensemble_centres",
+    "fit_proposal",
     "initial_walkers",
     "load_state",
     "moves_for",
-    "pooled",
-    "proposal_at",
+    "proposal_change",
     "sample",
     "walker_count",
-    "warmup_rounds",
+    "warmup_bounds",
 ]
