@@ -37,6 +37,7 @@ from . import materials
 from .data import Dataset, Run
 from .data.dataset import OPTIONAL_SIGNALS
 from .data.format import TESTS
+from .defaults import MAX_PRESSURE_KPA
 from .errors import PeanoBayesError, PeanoBayesInputError, did_you_mean
 from .materials import GEOMETRY, MaterialSpec
 from .physics import (
@@ -708,14 +709,15 @@ _veale_force = jax.jit(veale_force)
 _veale_blocking_force = jax.jit(veale_blocking_force)
 
 
-def _veale_truths(params, spec: MaterialSpec, protocol: RigProtocol, tests) -> list[_Truth]:
-    """The noise-free signals of every test condition of one specimen of Veale's model, in session order."""
+def _veale_truths(params, spec: MaterialSpec, protocol: RigProtocol, tests, cycle_pressures=None) -> list[_Truth]:
+    """The noise-free signals of every test condition of one specimen of Veale's model, in session order; load
+    cycles at ``cycle_pressures`` [Pa] (default: 0 and the test pressure)."""
     p_test = spec.test_pressure_pa
     slow = partial(_sample_times, protocol.quasi_static_rate_hz)
     truths = []
     if "load_cycle" in tests:
         t = slow(protocol.cycle_duration_s)
-        for condition, p in enumerate((0.0, p_test)):
+        for condition, p in enumerate((0.0, p_test) if cycle_pressures is None else cycle_pressures):
             start = float(_veale_strain_at_force(p, spec.start_tension_n, params))
             low = min(protocol.stretch_strain, start - protocol.min_stretch)
             strain = np.interp(t, [0.0, 0.5 * t[-1], t[-1]], [start, low, start])
@@ -748,6 +750,7 @@ def simulate_veale_dataset(
     specimens: int = 2,
     tests: Iterable[str] = VEALE_TESTS,
     protocol: RigProtocol = DEFAULT_PROTOCOL,
+    cycle_pressures_pa: Iterable[float] | None = None,
 ) -> Dataset:
     """The rig's quasi-static protocol run on Veale's force-balance model instead of peano_bayes' own physics:
     data from another model of the same muscle, for checks that must not share the fitted model's assumptions
@@ -759,7 +762,9 @@ def simulate_veale_dataset(
     ramp, and the stroke test's strain where the muscle carries the hanging load. ``params``: a
     :class:`~peano_bayes.physics.reference.VealeParameters` (default: the paper's Table 2); each specimen
     multiplies the stiffnesses of :data:`VEALE_VARYING` by its own log-normal factor of sigma
-    ``specimen_spread``. ``tests``: some of :data:`VEALE_TESTS`. The provenance names the generating model and
+    ``specimen_spread``. ``tests``: some of :data:`VEALE_TESTS`. ``cycle_pressures_pa``: the load cycles'
+    pressures [Pa], one condition each (default: 0 and the material's test pressure; each in [0, 1 MPa]). The
+    provenance names the generating model and
     every specimen's parameters. Raises :class:`~peano_bayes.errors.PeanoBayesInputError` for bad input
     (a step test among them: the static model has no dynamics), before anything is simulated.
     """
@@ -771,6 +776,14 @@ def simulate_veale_dataset(
             "Veale's force-balance model is static and cannot run a step test; expected some of "
             + ", ".join(VEALE_TESTS)
         )
+    if cycle_pressures_pa is not None:
+        cycle_pressures_pa = tuple(float(p) for p in cycle_pressures_pa)
+        limit_pa = MAX_PRESSURE_KPA * 1e3
+        if not cycle_pressures_pa or not all(math.isfinite(p) and 0 <= p <= limit_pa for p in cycle_pressures_pa):
+            raise PeanoBayesInputError(
+                f"cycle_pressures_pa must be one or more pressures in [0, {limit_pa:g}] Pa, got "
+                f"{cycle_pressures_pa!r}"
+            )
     base = {f.name: float(getattr(params, f.name)) for f in dataclasses.fields(params)}
     runs, per_specimen = [], {}
     for index in range(specimens):
@@ -779,25 +792,31 @@ def simulate_veale_dataset(
         own = {k: v * float(np.exp(specimen_spread * rng.standard_normal())) if k in VEALE_VARYING else v
                for k, v in base.items()}  # fmt: skip
         per_specimen[label] = own
-        truths = _veale_truths(type(params)(**own), spec, protocol, tests)
+        truths = _veale_truths(type(params)(**own), spec, protocol, tests, cycle_pressures_pa)
         runs += _session_runs(label, index, truths, seed=seed, noise=noise, repeats=repeats, drift=False)
+    provenance = _provenance(
+        source="synthetic: Veale's force-balance model (peano_bayes.rig.simulate_veale_dataset), not a "
+        "measurement and not peano_bayes' own physics",
+        seed=seed,
+        model={"model": "veale_force_balance", "parameters": json.dumps(base)},
+        per_specimen=per_specimen,
+        noise=noise,
+        drift=False,
+        spread=specimen_spread,
+        protocol=protocol,
+        repeats=repeats,
+    )
+    if cycle_pressures_pa is not None:
+        provenance["runs"] = "; ".join(
+            f"load_cycle runs {c * repeats}-{(c + 1) * repeats - 1} at {p / 1e3:g} kPa"
+            for c, p in enumerate(cycle_pressures_pa)
+        )
     return Dataset(
         material=spec.data_material(),
         geometry=GEOMETRY,
         conditions=spec.conditions(),
         runs=_fill_optional(runs),
-        provenance=_provenance(
-            source="synthetic: Veale's force-balance model (peano_bayes.rig.simulate_veale_dataset), not a "
-            "measurement and not peano_bayes' own physics",
-            seed=seed,
-            model={"model": "veale_force_balance", "parameters": json.dumps(base)},
-            per_specimen=per_specimen,
-            noise=noise,
-            drift=False,
-            spread=specimen_spread,
-            protocol=protocol,
-            repeats=repeats,
-        ),
+        provenance=provenance,
     )
 
 

@@ -303,3 +303,22 @@ def test_veale_rig_refuses_a_step_test_before_simulating():
         simulate_veale_dataset("TP", tests=("load_cycle", "step"))
     with pytest.raises(PeanoBayesInputError, match="specimen_spread"):
         simulate_veale_dataset("TP", specimen_spread=2.0)
+
+
+def test_veale_rig_runs_load_cycles_at_the_pressures_asked_and_refuses_others():
+    from peano_bayes.rig import simulate_veale_dataset
+
+    pressures = (100e3, 300e3, 500e3)
+    data = simulate_veale_dataset("TPC", seed=3, noise=QUIET, specimens=1, repeats=2, tests=("load_cycle",),
+                                  cycle_pressures_pa=pressures)  # fmt: skip
+    runs = by_key(data)
+    assert sorted(n for (_, _, n) in runs) == [0, 1, 2, 3, 4, 5]  # two repeats of each of three conditions
+    for condition, p in enumerate(pressures):
+        assert np.median(runs[("A", "load_cycle", 2 * condition)].pressure_pa) == pytest.approx(p, abs=1.0)
+    assert "runs 4-5 at 500 kPa" in data.provenance["runs"]
+    # more pressure, more force at the same start of the cycle (the muscle pulls harder)
+    peaks = [runs[("A", "load_cycle", 2 * c)].force_n.max() for c in range(3)]
+    assert peaks[0] < peaks[1] < peaks[2]
+    for bad in ((), (-1.0,), (2e6,), (float("nan"),)):
+        with pytest.raises(PeanoBayesInputError, match="cycle_pressures_pa must be one or more pressures"):
+            simulate_veale_dataset("TPC", tests=("load_cycle",), cycle_pressures_pa=bad)
