@@ -1,16 +1,21 @@
 """The main job's cost: `peano-bayes run` from a fresh clone with an empty compilation cache, ours beside a
 reference commit, one after the other on this machine.
 
-    python experiments/bench_main_job.py [--reference REF] [--materials TP FC ...] [--jobs 2] [--max-steps N]
+    python experiments/bench_main_job.py [--reference REF | --reference-json FILE] [--materials TP FC ...]
+                                         [--jobs 2] [--max-steps N] [--keep DIR]
 
 For each of HEAD and ``--reference`` (if given) the repository is cloned into a temporary folder and checked
 out there, and ``python -m peano_bayes run`` runs in the clone with this interpreter's packages (the versions
 ``constraints.txt`` pins; building a virtual environment per clone would time pip, not the job), a fresh
 ``PEANO_BAYES_CACHE`` (so every program compiles from nothing) and the given options. The wall time is the
 whole command's. Per material, from its ``summary.json``: the stage times (least squares, mode, compile,
-sampling), steps, tau_max, max R-hat, min bulk and tail ESS and whether it converged; a material without a
+sampling), warm-up length, steps, tau_max, max R-hat, min bulk and tail ESS and whether it converged; a material
+without a
 summary (the run failed) is reported as missing. The last line is one JSON object with both runs and, when
 both ran, the ratio of their wall times (reference / ours). ``--keep DIR`` keeps the result folders.
+
+Both runs take the machine for most of an hour; to keep them apart but on the same day, measure the reference
+first with ``--ref REF --save-json REF.json`` and later pass ``--reference-json REF.json`` to the run of HEAD.
 """
 
 from __future__ import annotations
@@ -35,6 +40,8 @@ def material_figures(summary: dict) -> dict:
     per = lambda key: list((conv.get(key) or {}).values())  # noqa: E731
     return {
         "stages_s": {k: round(float(v), 1) for k, v in summary.get("timings_s", {}).items()},
+        "warmup": summary.get("warmup"),
+        "warmup_stable": summary.get("warmup_stable"),
         "steps": summary.get("steps"),
         "tau_max": max(per("tau_steps"), default=None),
         "max_rhat": max(per("rhat"), default=None),
@@ -66,7 +73,9 @@ def run_at(ref: str, materials, options: list[str], keep: Path | None) -> dict:
             per[code] = material_figures(json.loads(path.read_text())) if path.exists() else {"missing": True}
         if keep is not None:
             shutil.copytree(out, keep / commit, dirs_exist_ok=True)
-        return {"ref": ref, "commit": commit, "exit_status": status, "wall_s": round(wall, 1), "materials": per}
+        finished = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+        return {"ref": ref, "commit": commit, "exit_status": status, "wall_s": round(wall, 1), "finished_utc": finished,
+                "materials": per}  # fmt: skip
 
 
 def table(run: dict) -> str:
@@ -77,7 +86,8 @@ def table(run: dict) -> str:
             continue
         stages = ", ".join(f"{k.removesuffix('_s')} {v:.0f}" for k, v in m["stages_s"].items())
         lines.append(
-            f"  {code:4s} {m['steps']} steps, tau_max {m['tau_max']:.1f}, R-hat {m['max_rhat']:.3f}, "
+            f"  {code:4s} {m.get('warmup')} warm-up, {m['steps']} steps, tau_max {m['tau_max']:.1f}, "
+            f"R-hat {m['max_rhat']:.3f}, "
             f"ESS {m['min_ess_bulk']:.0f}/{m['min_ess_tail']:.0f}, converged {m['converged']}; {stages} s"
         )
     return "\n".join(lines)
@@ -90,15 +100,31 @@ def main(argv=None) -> int:
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--max-steps", type=int, help="step limit per material (default: the run command's)")
     parser.add_argument("--keep", type=Path, help="copy each run's results folder into KEEP/<commit>/")
+    parser.add_argument(
+        "--reference-json",
+        type=Path,
+        help="a reference run measured earlier the same day by this script's run_at (its JSON), instead of running "
+        "--reference now: lets the two runs be made apart while other work waits; its finish time is reported",
+    )
+    parser.add_argument("--save-json", type=Path, help="also write the run of --ref (default HEAD) to this file")
+    parser.add_argument("--ref", default="HEAD", help="the code measured as 'ours' (default HEAD)")
     args = parser.parse_args(argv)
+    if args.reference and args.reference_json:
+        parser.error("give --reference or --reference-json, not both")
     options = ["--jobs", str(args.jobs), "--no-progress"]
     if args.max_steps:
         options += ["--max-steps", str(args.max_steps)]
-    runs = {"ours": run_at("HEAD", args.materials, options, args.keep)}
+    runs = {"ours": run_at(args.ref, args.materials, options, args.keep)}
+    if args.save_json:
+        args.save_json.write_text(json.dumps(runs["ours"]))
     print(table(runs["ours"]), flush=True)
-    if args.reference:
+    if args.reference_json:
+        runs["reference"] = json.loads(args.reference_json.read_text())
+        print(table(runs["reference"]), flush=True)
+    elif args.reference:
         runs["reference"] = run_at(args.reference, args.materials, options, args.keep)
         print(table(runs["reference"]), flush=True)
+    if "reference" in runs:
         runs["wall_ratio_reference_over_ours"] = round(runs["reference"]["wall_s"] / runs["ours"]["wall_s"], 2)
     print(json.dumps({"materials": args.materials, "jobs": args.jobs, "cores": os.cpu_count(), **runs}))
     return 0
