@@ -75,9 +75,8 @@ def recovered():
         covariance,
         n_walkers=8,  # per ensemble: four ensembles of eight, 2 x the dimension each
         seed=2,
-        # tau is about 4 steps here: 150 steps of warm-up from the mode and a first chunk of 250 (>= 50 tau after
-        # the discarded 2 tau) certify it, where the defaults (300 + 500) would sample twice as long
-        warmup=150,
+        # the default adaptive warm-up and the rule of a user's fit; tau is about 4 steps here, so the first
+        # chunks (100 steps, then what is missing) certify it
         chunk=250,
         max_steps=6000,
         progress=False,

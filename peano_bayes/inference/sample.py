@@ -591,15 +591,18 @@ def sample(
             finally:
                 if bar is not None:
                     bar.close()
-            chain = np.concatenate([chain, np.concatenate([s.get_chain() for s in samplers], axis=1)])
-            lps = np.concatenate([lps, np.concatenate([s.get_log_prob() for s in samplers], axis=1)])
-            accepted = float(np.mean(np.concatenate([s.acceptance_fraction for s in samplers])))
+            if taken:  # (a stop before the chunk's first step adds nothing)
+                chain = np.concatenate([chain, np.concatenate([s.get_chain() for s in samplers], axis=1)])
+                lps = np.concatenate([lps, np.concatenate([s.get_log_prob() for s in samplers], axis=1)])
+                accepted = float(np.mean(np.concatenate([s.acceptance_fraction for s in samplers])))
             step_s = (time.perf_counter() - t0) / max(taken, 1)
             steps = chain.shape[0]
+            # each state carries its ensemble's RNG state as of its last step (the start's, before any step)
+            random_states = [state.random_state for state in states]
             if interrupted.is_set():
                 where = ""
                 if state_path is not None:
-                    _save_state(state_path, chain, lps, [s.random_state for s in samplers], {**meta, "checks": checks})
+                    _save_state(state_path, chain, lps, random_states, {**meta, "checks": checks})
                     where = f"; state saved in {state_path}: run the same command with --resume to continue"
                 raise SamplingInterrupted(f"stopped at step {steps}{where}")
             chunks.append({"steps": steps, "seconds": step_s * taken, "acceptance": accepted, "warmup": in_warmup})
@@ -622,7 +625,7 @@ def sample(
             else:
                 result = check(steps, end)
                 missing = 0.0 if result.converged else missing_steps(result, steps, end)
-                change = "" if result.tau_change is None else f" ({100 * result.tau_change:+.0f} %)"
+                change = "" if result.tau_change is None else f" (changed {100 * result.tau_change:.0f} %)"
                 log(
                     f"sampling step {steps} (warm-up {end}): acceptance {accepted:.2f}, tau_max "
                     f"{result.tau_max:.1f}{change}, {result.tau_lengths:.0f} tau kept, max R-hat "
@@ -631,7 +634,7 @@ def sample(
                     + ("; converged" if result.converged else f"; ETA {_eta(max(missing, MIN_CHUNK) * step_s)}")
                 )
             if state_path is not None:
-                _save_state(state_path, chain, lps, [s.random_state for s in samplers], {**meta, "checks": checks})
+                _save_state(state_path, chain, lps, random_states, {**meta, "checks": checks})
             if result is not None and not in_warmup and result.converged and steps >= min_steps:
                 break
     adaptation = adapt(chain, warmup, max_warmup)
