@@ -506,3 +506,18 @@ def test_without_a_terminal_progress_is_one_line_per_check(capsys):
     assert checks and all("tau_max" in c and "R-hat" in c and "ESS" in c for c in checks)
     assert all("ETA" in c or "converged" in c for c in checks)
     assert any(line.startswith("warm-up step 200") for line in lines)
+
+
+def test_distinct_least_squares_optima_are_the_converged_far_and_nearly_as_good_starts():
+    """Five starts in 2-D, Laplace sd 1 at the best (0, 0), cost 10: a start at the best itself, one 5 sd away at
+    cost 11 (an optimum), its twin 0.1 sd from it (the same optimum), one 5 sd away but 3 worse than d = 2 allows,
+    one far and good but unconverged."""
+    from peano_bayes.inference.fit import OPTIMUM_DISTANCE, distinct_optima
+
+    values = np.array([[0.0, 0.0], [5.0, 0.0], [5.1, 0.0], [0.0, -5.0], [-5.0, 5.0]])
+    costs = np.array([10.0, 11.0, 11.2, 13.0, 10.5])
+    converged = np.array([True, True, True, True, False])
+    assert OPTIMUM_DISTANCE < 5.0
+    assert distinct_optima(values, costs, converged, np.eye(2), values[0], 10.0) == [1]
+    # in a metric where 5 units are under 3 sd, none is distinct
+    assert distinct_optima(values, costs, converged, 4.0 * np.eye(2), values[0], 10.0) == []
