@@ -130,8 +130,8 @@ def test_the_results_page_names_a_bundled_dataset_by_its_place_in_the_package():
 
 
 def test_a_resumed_state_needs_the_point_its_input_error_was_linearised_at(tmp_path):
-    """A resume reads the linearisation point and the AR(1) residual correlations taken there back (none in a file
-    written before they existed); a state without it (an earlier version's likelihood) or with
+    """A resume reads the linearisation point, the AR(1) residual correlations taken there and the contrasts sampled
+    non-centred back (none in a file written before they existed); a state without it (an earlier version's likelihood) or with
     other parameters is refused with a message naming the file and what to do."""
     posterior = SimpleNamespace(names=("a", "b"))
     path, state = tmp_path / "input_error_point.json", tmp_path / "sampler_state.npz"
@@ -141,8 +141,23 @@ def test_a_resumed_state_needs_the_point_its_input_error_was_linearised_at(tmp_p
     with pytest.raises(PeanoBayesInputError, match="linearised over the parameters a, c; this fit samples a, b"):
         _linearisation_point(path, state, posterior)
     path.write_text(json.dumps({"names": ["a", "b"], "theta": [1.0, 0.1 + 0.2]}))  # written before AR(1) residuals
-    theta, lag1 = _linearisation_point(path, state, posterior)
+    theta, lag1, noncentred = _linearisation_point(path, state, posterior)
     np.testing.assert_array_equal(theta, [1.0, 0.1 + 0.2])
-    assert lag1 == {}
-    path.write_text(json.dumps({"names": ["a", "b"], "theta": [1.0, 2.0], "residual_lag1": {"blocking": 0.97}}))
-    assert _linearisation_point(path, state, posterior)[1] == {"blocking": 0.97}
+    assert lag1 == {} and noncentred == ()
+    path.write_text(json.dumps({"names": ["a", "b"], "theta": [1.0, 2.0], "residual_lag1": {"blocking": 0.97},
+                                "noncentred": [True, False]}))  # fmt: skip
+    assert _linearisation_point(path, state, posterior)[1:] == ({"blocking": 0.97}, (True, False))
+
+
+def test_a_main_job_unit_reports_its_material_in_the_worker(tmp_path, monkeypatch):
+    """The main job's unit samples and then computes its own metrics and figures (not the parent, one material
+    at a time); a fit-many unit does not."""
+    from peano_bayes import pipeline
+
+    calls = []
+    monkeypatch.setattr(pipeline, "infer", lambda source, out, **kw: {"material": "TP", "label": kw["label"]})
+    monkeypatch.setattr(pipeline, "material_report", lambda d, s, **kw: calls.append((d, s["label"], kw["n_draws"])))
+    pipeline._infer_unit("TP.csv", str(tmp_path), "TP", {"log": print}, report_draws=pipeline.REPORT_DRAWS)
+    assert calls == [(tmp_path / "TP", "TP", pipeline.REPORT_DRAWS)]
+    pipeline._infer_unit("TP.csv", str(tmp_path), "TP", {"log": print})
+    assert len(calls) == 1
