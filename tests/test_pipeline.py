@@ -131,8 +131,8 @@ def test_the_results_page_names_a_bundled_dataset_by_its_place_in_the_package():
 
 def test_a_resumed_state_needs_the_point_its_input_error_was_linearised_at(tmp_path):
     """A resume reads the linearisation point, the AR(1) residual correlations taken there and the contrasts sampled
-    non-centred back (none in a file written before they existed); a state without it (an earlier version's likelihood) or with
-    other parameters is refused with a message naming the file and what to do."""
+    non-centred back (none in a file written before they existed); a state without it (an earlier version's
+    likelihood) or with other parameters is refused with a message naming the file and what to do."""
     posterior = SimpleNamespace(names=("a", "b"))
     path, state = tmp_path / "input_error_point.json", tmp_path / "sampler_state.npz"
     with pytest.raises(PeanoBayesInputError, match="earlier version.*without --resume"):
