@@ -24,6 +24,7 @@ precision target; with ESS >= 1000 the means' Monte Carlo error is already about
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import arviz as az
@@ -91,7 +92,9 @@ def nested_rhat(kept: np.ndarray, n_ensembles: int) -> np.ndarray:
 def walker_ess(kept: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Bulk and tail ESS, each (D,), of ``kept`` (steps, walkers, D), every walker a chain (arviz; split and
     rank-normalized), each figure computed once for all parameters."""
-    data = az.convert_to_dataset({f"p{i}": kept[..., i].T for i in range(kept.shape[-1])})
+    with warnings.catch_warnings():  # many walkers and a short kept chain are expected, not a shape mistake
+        warnings.filterwarnings("ignore", message="More chains", category=UserWarning)
+        data = az.convert_to_dataset({f"p{i}": kept[..., i].T for i in range(kept.shape[-1])})
     return tuple(
         np.array([float(figure[k]) for k in data.data_vars])
         for figure in (az.ess(data, method="bulk"), az.ess(data, method="tail"))
