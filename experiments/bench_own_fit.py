@@ -11,7 +11,8 @@ runs pinned to one core (``taskset -c 0`` where it exists) with an empty compila
 stages, warm-up, steps, tau (the largest, and the between-specimen spread's), R-hat, ESS and verdict are read
 from ``summary.json``. Target (main-job issue): converged in at most 5 minutes of wall.
 
-    .venv/bin/python experiments/bench_own_fit.py [--seed 0] [--keep DIR] [--coordinates KIND]
+    .venv/bin/python experiments/bench_own_fit.py [--seed 0] [--keep DIR] [--coordinates KIND] [--contrasts KIND]
+        [--max-steps N]
 
 Last line: one JSON object.
 """
@@ -60,6 +61,8 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=int, default=0, help="seed of the simulated file (default 0)")
     parser.add_argument("--keep", type=Path, help="copy the file and the result folder here")
     parser.add_argument("--coordinates", help="sampler coordinates to pass to fit (default: fit's own)")
+    parser.add_argument("--contrasts", help="--contrasts to pass to fit (default: fit's own, auto)")
+    parser.add_argument("--max-steps", type=int, help="--max-steps to pass to fit (an arm stopped at another's length)")
     args = parser.parse_args(argv)
     cli = [sys.executable, "-m", "peano_bayes"]
     pin = ["taskset", "-c", "0"] if shutil.which("taskset") else []
@@ -71,8 +74,9 @@ def main(argv=None) -> int:
         env = {**os.environ, "PEANO_BAYES_CACHE": str(tmp / "cache")}
         cmd = [*pin, *cli, "fit", str(data), "--prior", str(tmp / "prior.toml"), "--tests", "load_cycle",
                "--no-discover", "--no-progress", "--label", "own", "--out", str(tmp / "results")]  # fmt: skip
-        if args.coordinates:
-            cmd += ["--coordinates", args.coordinates]
+        for option in ("coordinates", "contrasts", "max_steps"):
+            if getattr(args, option) is not None:
+                cmd += [f"--{option.replace('_', '-')}", str(getattr(args, option))]
         print(" ".join(cmd[len(pin) :]), file=sys.stderr, flush=True)
         t0 = time.perf_counter()
         status = subprocess.run(cmd, env=env).returncode
@@ -101,6 +105,7 @@ def main(argv=None) -> int:
             min_ess_bulk=round(min(conv["ess_bulk"].values())),
             min_ess_tail=round(min(conv["ess_tail"].values())),
             coordinates=summary.get("sampler_coordinates"),
+            tau_by_parameter={k: round(v, 1) for k, v in sorted(tau.items(), key=lambda kv: -kv[1])[:6]},
             within_target=bool(conv["converged"] and wall <= TARGET_S),
         )
     print(json.dumps(row))
