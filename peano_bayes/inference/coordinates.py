@@ -28,7 +28,7 @@ from .priors import Marginal
 KA, KB = "tensile_ka_n_per_m", "tensile_kb_n_per_m2"
 #: Forces [N] of the tensile element's stretches in :class:`TensileStretch`. The load cycles and blocking tests
 #: span about 0-60 N; on PR's posterior the choice between four pairs in 0.5-40 N changed the t proposal's fit
-#: (a probe since removed; git history keeps ``experiments/diagnose_mixing.py``) by under 1 %.
+#: (measured by a mixing probe that git history keeps) by under 1 %.
 STRETCH_FORCES_N = (1.0, 20.0)
 
 
