@@ -236,25 +236,40 @@ def _centre_draw(centre: np.ndarray, covariance: np.ndarray, scale: float, rng: 
 
 
 def ensemble_centres(
-    posterior: Posterior, centre: np.ndarray, covariance: np.ndarray, n_ensembles: int, seed: int, optima=None
+    posterior: Posterior,
+    centre: np.ndarray,
+    covariance: np.ndarray,
+    n_ensembles: int,
+    seed: int,
+    optima=None,
+    rows: int | None = None,
 ) -> np.ndarray:
     """(n_ensembles, D) start centres in theta: ``optima`` (k, D), distinct least-squares optima, first (at most
     ``n_ensembles`` of them), then draws of N(``centre``, (:data:`CENTRE_SPREAD` sd)^2) of ``covariance``, each
     with a finite log posterior (a draw where it is not is replaced by one at half the spread, up to 20 times;
-    then ``centre`` itself)."""
+    then ``centre`` itself). The draws are evaluated together in calls of ``rows`` points (the walkers' own
+    batch size, default ``n_ensembles``), so no other batch shape is compiled."""
     given = [] if optima is None else [np.asarray(o, dtype=float) for o in optima][:n_ensembles]
-    out = list(given)
-    for e in range(len(given), n_ensembles):
-        rng = np.random.default_rng([seed, 2, e])
-        scale, point = CENTRE_SPREAD, np.asarray(centre, dtype=float)
-        for _ in range(20):
-            trial = _centre_draw(centre, covariance, scale, rng)
-            if np.isfinite(posterior.batched(trial[None])[0]):
-                point = trial
-                break
-            scale *= 0.5
-        out.append(point)
-    return np.array(out)
+    todo = list(range(len(given), n_ensembles))
+    out = {e: p for e, p in enumerate(given)}
+    rngs = {e: np.random.default_rng([seed, 2, e]) for e in todo}
+    scales = dict.fromkeys(todo, CENTRE_SPREAD)
+    rows = max(rows or n_ensembles, 1)
+    for _ in range(20):
+        if not todo:
+            break
+        trials = np.array([_centre_draw(centre, covariance, scales[e], rngs[e]) for e in todo])
+        padded = np.vstack([trials, np.repeat(trials[-1:], max(rows - len(trials), 0), axis=0)])
+        finite = np.isfinite(posterior.batched(padded)[: len(trials)])
+        for e, trial, ok in zip(list(todo), trials, finite, strict=True):
+            if ok:
+                out[e] = trial
+                todo.remove(e)
+            else:
+                scales[e] *= 0.5
+    for e in todo:
+        out[e] = np.asarray(centre, dtype=float)
+    return np.array([out[e] for e in range(n_ensembles)])
 
 
 def initial_walkers(
@@ -525,7 +540,7 @@ def sample(
         log(f"resumed from {state_path} at step {chain.shape[0]}")
     else:
         states = []
-        centres = ensemble_centres(posterior, centre, covariance, n_ensembles, seed, optima)
+        centres = ensemble_centres(posterior, centre, covariance, n_ensembles, seed, optima, rows=per)
         for e in range(n_ensembles):
             walkers, lp0 = initial_walkers(posterior, centres[e], WALKER_SPREAD**2 * covariance, per, seed, e)
             walkers = coordinates.to_sampler(walkers)
