@@ -290,36 +290,48 @@ def _linearisation_point(path: Path, state_path: Path, posterior) -> tuple[np.nd
 DISCOVERY_FOLDER = "discovery"
 
 
-def _model_choice(dataset: Dataset, config, out: Path, *, discover: bool, resume: bool, seed: int, log, centre=None):
-    """The model a fit samples: ``config``, or with ``discover`` ``config`` plus what discovery names on the
-    data (its report in ``out/discovery``; its base fit also starts around ``centre``, name -> value [SI], the
-    prior's medians). On ``resume`` the model of the saved fit: the report's if there is one, else ``config``."""
-    from .discovery.choice import choice_from_report, choose_model, configured_model, effects_in
+def _model_choice(dataset: Dataset, config, out: Path, *, discover: bool, resume: bool, log):
+    """The model a fit samples when it is known before any fit: ``config`` without ``discover``; on ``resume``
+    the model of the saved fit (the discovery report's if there is one, else ``config``). ``None`` when
+    discovery is still to run (:func:`_discover`, from the least squares of ``config``)."""
+    from .discovery.choice import choice_from_report, configured_model
 
     folder = out / DISCOVERY_FOLDER
     # A resumed fit keeps the model its saved least squares and sampler state belong to, whatever the flag says.
     read_back = resume and (folder / "report.json").exists()
     resumed_without = resume and not read_back and (out / "fit.json").exists()
-    if not read_back and (resumed_without or not discover):
-        if resumed_without and discover:
-            log(
-                f"{dataset.material.code}: resuming a fit sampled without discovery; discovery not run (delete "
-                f"{out} to redo it with discovery)"
-            )
-        return configured_model(config)
-    code = dataset.material.code
     if read_back:
         choice = choice_from_report(config, json.loads((folder / "report.json").read_text()), folder)
-        log(f"{code}: discovery report read from {folder}")
-    else:
-        log(f"{code}: discovery from the configured model ({' + '.join(effects_in(config))}) ...")
-        # the dataset holds the fitted tests only; discovery reads its first specimen's
-        say = lambda m: log(f"{code}: discovery: {m}")  # noqa: E731
-        choice = choose_model(dataset, config, folder, seed=seed, log=say, centre=centre)
+        log(f"{dataset.material.code}: discovery report read from {folder}")
+        _log_choice(dataset.material.code, choice, log)
+        return choice
+    if resumed_without and discover:
+        log(
+            f"{dataset.material.code}: resuming a fit sampled without discovery; discovery not run (delete "
+            f"{out} to redo it with discovery)"
+        )
+    return None if discover and not resumed_without else configured_model(config)
+
+
+def _log_choice(code: str, choice, log) -> None:
     added = ", ".join(choice.adopted) or "nothing"
     log(f"{code}: discovery verdict {choice.verdict}; named {', '.join(choice.named) or 'none'}; added {added}")
     if choice.not_in_model:
         log(f"{code}: named but not in the inference model: {', '.join(choice.not_in_model)}")
+
+
+def _discover(dataset: Dataset, config, out: Path, *, seed: int, log, start: dict):
+    """Discovery on ``dataset`` from ``config``'s effects, its base fit started at ``start`` (name -> value [SI],
+    the least-squares optimum of ``config`` on the same data); its report goes into ``out/discovery``. Returns
+    the :class:`~peano_bayes.discovery.choice.ModelChoice`: ``config`` plus the physics effects discovery named."""
+    from .discovery.choice import choose_model, effects_in
+
+    code = dataset.material.code
+    log(f"{code}: discovery from the configured model ({' + '.join(effects_in(config))}), at its least squares ...")
+    # the dataset holds the fitted tests only; discovery reads its first specimen's
+    say = lambda m: log(f"{code}: discovery: {m}")  # noqa: E731
+    choice = choose_model(dataset, config, out / DISCOVERY_FOLDER, seed=seed, log=say, start=start)
+    _log_choice(code, choice, log)
     return choice
 
 
@@ -420,22 +432,40 @@ def infer(
     code = dataset.material.code
     whole_prior = prior_of(dataset, prior)
     out = Path(out_dir) / _check_label(_default_label(dataset) if label is None else label)
-    choice = _model_choice(
-        dataset,
-        whole_prior.config,
-        out,
-        discover=discover,
-        resume=resume,
-        seed=seed,
-        log=log,
-        centre=whole_prior.median(),
-    )
+    choice = _model_choice(dataset, whole_prior.config, out, discover=discover, resume=resume, log=log)
+    # refuses too few walkers before anything is written
+    plan = _plan_posterior(
+        dataset, whole_prior, whole_prior.config if choice is None else choice.config, sample_all=sample_all,
+        n_walkers=n_walkers,
+    )  # fmt: skip
+    fit_path, state_path = out / "fit.json", out / "sampler_state.npz"
+    linearised_path = out / "input_error_point.json"
+    fitted = None
+    if resume and fit_path.exists():
+        fitted = json.loads(fit_path.read_text())
+        timings["least_squares_s"] = fitted["seconds"]
+        log(f"{code}: least squares loaded from {fit_path}")
+    else:
+        for stale in (fit_path, state_path, linearised_path):
+            stale.unlink(missing_ok=True)
+
+    def fit_plan(plan: PosteriorPlan) -> dict:
+        log(f"{code}: least squares from up to {n_starts} starts ...")
+        fitted = least_squares(plan.posterior, plan.prior, n_starts=n_starts, seed=seed)
+        timings["least_squares_s"] = timings.get("least_squares_s", 0.0) + fitted["seconds"]
+        log(f"{code}: least squares done in {fitted['seconds']:.1f} s ({least_squares_outcome(fitted)})")
+        return fitted
+
+    if choice is None:  # discovery starts from the configured model's least squares: one fit serves both
+        fitted = fit_plan(plan)
+        choice = _discover(dataset, whole_prior.config, out, seed=seed, log=log, start=fitted["params"])
+        if choice.adopted:  # a larger model: its own least squares
+            plan = _plan_posterior(dataset, whole_prior, choice.config, sample_all=sample_all, n_walkers=n_walkers)
+            fitted = None
     seconds = _discovery_seconds(choice)
     if seconds is not None:
         timings["discovery_s"] = seconds
-    # refuses too few walkers before anything is written
-    plan = _plan_posterior(dataset, whole_prior, choice.config, sample_all=sample_all, n_walkers=n_walkers)
-    if plan.config is not choice.config:
+    if plan.config != choice.config:
         log(f"{code}: some runs carry an added mount compliance, so the model includes the mount")
         choice = dataclasses.replace(choice, config=plan.config)
     config, prior, observations, posterior, n_walkers = plan
@@ -444,21 +474,10 @@ def infer(
         f"{code}: {observations.n_bins} bins from {len(dataset.runs)} runs ({', '.join(dataset.tests)}); "
         f"{posterior.ndim} parameters sampled"
     )
-
-    fit_path, state_path = out / "fit.json", out / "sampler_state.npz"
-    linearised_path = out / "input_error_point.json"
-    if resume and fit_path.exists():
-        fitted = json.loads(fit_path.read_text())
-        timings["least_squares_s"] = fitted["seconds"]
-        log(f"{code}: least squares loaded from {fit_path}")
-    else:
-        for stale in (fit_path, state_path, linearised_path):
-            stale.unlink(missing_ok=True)
-        log(f"{code}: least squares from {n_starts} starts ...")
-        fitted = least_squares(posterior, prior, n_starts=n_starts, seed=seed)
+    if fitted is None:
+        fitted = fit_plan(plan)
+    if not (resume and fit_path.exists()):
         write_text(fit_path, json.dumps(fitted, indent=1))
-        timings["least_squares_s"] = fitted["seconds"]
-        log(f"{code}: least squares done in {fitted['seconds']:.1f} s ({least_squares_outcome(fitted)})")
 
     centre, covariance = walker_start(posterior, fitted)
     # Every batch in calls of half an ensemble (what emcee's red-blue moves evaluate): one compilation, which
@@ -964,9 +983,7 @@ def material_report(
 REPORT_DRAWS = 100
 
 
-def report_results(
-    out_dir: str | Path, materials=BUNDLED_MATERIALS, *, n_draws: int = REPORT_DRAWS, log=print
-) -> dict:
+def report_results(out_dir: str | Path, materials=BUNDLED_MATERIALS, *, n_draws: int = REPORT_DRAWS, log=print) -> dict:
     """Metrics, figures, ranking and ``index.md`` for the finished materials of ``out_dir``.
 
     Per material with a ``summary.json``: ``metrics.json`` (:func:`~peano_bayes.metrics.evaluate_result`, kept

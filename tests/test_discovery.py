@@ -962,3 +962,27 @@ def test_a_base_fit_stopped_at_the_step_limit_goes_on_while_it_improves(monkeypa
     for before, after in zip(calls[:-1], calls[1:], strict=True):
         assert after == sorted(v / 2.0 for v in before if v / 2.0 >= 1.0)[: len(after)]
     assert len(calls) <= 1 + workflow.BASE_CONTINUATIONS
+    # From the inference least squares' optimum: one batch, that point first, the rest scattered about it only.
+    calls.clear()
+    best = workflow.fit_base(DEFAULT_BASE, None, starts=2, seed=0, centre=centre, start={"bending_k1_n": 3.0})
+    assert len(calls[0]) == workflow.BATCH and calls[0][0] == 3.0
+    assert all(0.2 < v / 3.0 < 5.0 for v in calls[0])  # e^N(0, 0.3) about the start, none at the centre (40)
+    assert best.converged
+
+
+def test_a_base_fit_that_only_creeps_stops_and_is_marked_stationary(monkeypatch):
+    """A start that never meets the solver's tolerance but gains less than ``BASE_MIN_GAIN`` a round stops after
+    one continuation, keeps its lower point and is marked stationary."""
+    import peano_bayes.discovery.workflow as workflow
+
+    calls = []
+
+    def creeping(specs, starts, data):
+        calls.append(len(starts))
+        cost = 100.0 - 0.05 * len(calls)
+        pairs = zip(specs, starts, strict=True)
+        return [ModelFit(spec, np.array(s), np.array(s), cost, False, {}, np.eye(1)) for spec, s in pairs]
+
+    monkeypatch.setattr(workflow, "fit_models", creeping)
+    best = workflow.fit_base(DEFAULT_BASE, None, starts=2, seed=0)
+    assert len(calls) == 2 and best.stationary and not best.converged and best.cost == pytest.approx(99.9)

@@ -125,14 +125,14 @@ def test_a_resumed_fit_reads_the_discovery_report_instead_of_running_discovery(t
     (folder / "report.json").write_text(json.dumps({"verdict": "named", "named": ["nonlinear_damping"]}))
     lines = []
     choice = _model_choice(
-        load(bundled.dataset_path("TP")), BARE, tmp_path / "TP", discover=True, resume=True, seed=0, log=lines.append
+        load(bundled.dataset_path("TP")), BARE, tmp_path / "TP", discover=True, resume=True, log=lines.append
     )
     assert choice.config.damping and choice.adopted == ("nonlinear_damping",) and choice.report == str(folder)
     assert any("discovery report read from" in line for line in lines)
     assert _discovery_seconds(choice) is None  # this report does not say how long discovery took
     (folder / "report.json").write_text(json.dumps({"verdict": "none", "named": [], "seconds": 107.5}))
     assert _discovery_seconds(choice) == 107.5 and _discovery_seconds(configured_model(BARE)) is None
-    assert _model_choice(None, BARE, tmp_path, discover=False, resume=False, seed=0, log=print).verdict is None
+    assert _model_choice(None, BARE, tmp_path, discover=False, resume=False, log=print).verdict is None
 
 
 def test_a_resumed_fit_keeps_the_model_of_its_saved_state(tmp_path):
@@ -147,12 +147,51 @@ def test_a_resumed_fit_keeps_the_model_of_its_saved_state(tmp_path):
     plain.mkdir()
     (plain / "fit.json").write_text("{}")
     lines = []
-    choice = _model_choice(dataset, BARE, plain, discover=True, resume=True, seed=0, log=lines.append)
+    choice = _model_choice(dataset, BARE, plain, discover=True, resume=True, log=lines.append)
     assert choice.verdict is None and choice.config == BARE
     assert any("resuming a fit sampled without discovery" in line for line in lines)
 
     found = tmp_path / "found"
     (found / "discovery").mkdir(parents=True)
     (found / "discovery" / "report.json").write_text(json.dumps({"verdict": "named", "named": ["hysteresis"]}))
-    choice = _model_choice(dataset, BARE, found, discover=False, resume=True, seed=0, log=lambda m: None)
+    choice = _model_choice(dataset, BARE, found, discover=False, resume=True, log=lambda m: None)
     assert choice.config.friction == "parallel" and choice.verdict == "named"
+
+
+@pytest.mark.parametrize("adopts", [False, True])
+def test_discovery_starts_from_the_fits_least_squares_which_also_serves_the_sampler(tmp_path, monkeypatch, adopts):
+    """``fit --discover``: the configured model's least squares runs once, discovery's base fit starts at its
+    optimum, and the same least squares seeds the sampler (``fit.json``) unless discovery adds an effect, when the
+    larger model gets its own least squares."""
+    from peano_bayes import bundled, pipeline
+    from peano_bayes.discovery import choice as choice_module
+
+    class Stop(Exception):
+        pass
+
+    fits, starts = [], []
+
+    def least_squares(posterior, prior, **kw):
+        fits.append(posterior.config)
+        return {"params": {"bending_k1_n": 40.0 + len(fits)}, "seconds": 1.0, "n_starts": 4, "n_failed": 0}
+
+    def choose_model(dataset, config, out_dir, *, start, **kw):
+        starts.append(start)
+        extra = next(e for e in PHYSICS_EFFECTS if LIBRARY[e].model and e not in effects_in(config))
+        report = {"verdict": "named" if adopts else "none", "named": [extra] if adopts else []}
+        return choice_from_report(config, report, out_dir)
+
+    def stop(*args, **kw):
+        raise Stop
+
+    monkeypatch.setattr(pipeline, "least_squares", least_squares)
+    monkeypatch.setattr(choice_module, "choose_model", choose_model)
+    monkeypatch.setattr(pipeline, "walker_start", stop)
+    with pytest.raises(Stop):
+        pipeline.infer(bundled.dataset_path("TP"), tmp_path, discover=True, figures=False, log=lambda m: None)
+    assert starts == [{"bending_k1_n": 41.0}]  # discovery started at the first least squares' optimum
+    assert len(fits) == (2 if adopts else 1)
+    if adopts:
+        assert effects_in(fits[1]) != effects_in(fits[0])  # the second fit is of the larger model
+    saved = json.loads((tmp_path / "TP" / "fit.json").read_text())
+    assert saved["params"] == {"bending_k1_n": 40.0 + len(fits)}  # the sampler starts from the sampled model's fit

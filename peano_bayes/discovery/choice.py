@@ -133,18 +133,28 @@ def choice_from_report(config: ModelConfig, report: dict, report_dir: str | Path
 
 
 def choose_model(
-    dataset, config: ModelConfig, out_dir: str | Path, *, tests=None, seed: int = 0, log=print, centre=None
+    dataset,
+    config: ModelConfig,
+    out_dir: str | Path,
+    *,
+    tests=None,
+    seed: int = 0,
+    log=print,
+    centre=None,
+    start=None,
 ):
     """Run discovery on ``dataset`` (its first specimen, ``tests``) from the effects of ``config`` as the base,
     its base fit started at ``centre`` (name -> value [SI]: the material prior's medians, which on the bundled
-    muscles lie decades from the library's nominal values) as well as at the nominal values, write the report
-    into ``out_dir`` and return the :class:`ModelChoice` that adds what it named."""
+    muscles lie decades from the library's nominal values) as well as at the nominal values, or with ``start``
+    (name -> value [SI], the inference least squares' optimum of ``config`` on the same data) from that point
+    alone (:func:`~peano_bayes.discovery.workflow.fit_base`); write the report into ``out_dir`` and return the
+    :class:`ModelChoice` that adds what it named."""
     from .data import discovery_data
     from .report import write_report
     from .workflow import discover
 
     split = discovery_data(dataset, tests=tests)
-    result = discover(split, base=effects_in(config), seed=seed, progress=log, centre=centre)
+    result = discover(split, base=effects_in(config), seed=seed, progress=log, centre=centre, start=start)
     write_report(result, Path(out_dir))
     return choice_from_report(config, result.report, out_dir)
 

@@ -124,7 +124,9 @@ class ModelFit:
 
     **Fields:** ``spec`` the model; ``u`` (d,) unconstrained point; ``x`` (d,) values [SI], ``NAMES`` order;
     ``cost``; ``converged``; ``sd`` name -> Laplace sd [SI] of each free parameter (delta method);
-    ``correlation`` (k, k) Laplace correlation of the free parameters (``spec.free_names`` order).
+    ``correlation`` (k, k) Laplace correlation of the free parameters (``spec.free_names`` order);
+    ``stationary`` (set by :func:`~.workflow.fit_base`) whether a further round from this point lowered the cost
+    by less than :data:`~.workflow.BASE_MIN_GAIN` although the solver had not met its step tolerance.
     """
 
     spec: ModelSpec
@@ -134,6 +136,7 @@ class ModelFit:
     converged: bool
     sd: dict
     correlation: np.ndarray
+    stationary: bool = False
 
     @property
     def params(self) -> dict:

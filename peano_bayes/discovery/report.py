@@ -172,7 +172,7 @@ def report_markdown(report: dict) -> str:
     if report["noise_model"]:
         lines.append(f"\nThe sensor or noise model needed: {', '.join(report['noise_model'])} (not physics).")
     lines += ["", f"Base model: {' + '.join(report['base'])}. Final model: {' + '.join(report['final_model'])}.", ""]
-    if not report.get("base_converged", True):
+    if not (report.get("base_converged", True) or report.get("base_stationary", False)):
         lines += [
             "The base model's least squares stopped at its step limit without converging: what the search adds "
             "may stand for a misfit of the base fit itself. Start it nearer the data (a prior's medians).",

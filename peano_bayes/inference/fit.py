@@ -78,11 +78,12 @@ class FitResult:
 
     **Fields:** ``names`` (d,); ``u`` (d,) best point, unconstrained; ``params`` name -> value [SI];
     ``covariance`` (d, d) Laplace covariance in u; ``cost`` half the sum of squared residuals at ``u``;
-    ``n_starts``; ``n_failed`` starts that ended non-finite or where the physics solver misses its
-    tolerance, in any round; ``n_step_limit`` starts, not failed, that the solver had not finished in the last
-    round (mostly stopped by ``max_steps``; kept: their point is valid, only not polished); ``converged``
-    whether the best start met the solver's tolerance (``None``: not recorded); ``rounds`` how many rounds of
-    at most ``max_steps`` steps ran;
+    ``n_starts`` the starts that ran (:func:`fit` stops adding starts once the best few agree); ``n_failed``
+    starts that ended non-finite or where the physics solver misses its tolerance, in any round;
+    ``n_step_limit`` starts, not failed, that the solver had not finished in their last round (mostly stopped by
+    ``max_steps``; kept: their point is valid, only not polished); ``converged`` whether the best start met the
+    solver's tolerance (``None``: not recorded); ``rounds`` how many rounds of at most ``max_steps`` steps the
+    best start's batch ran;
     ``start_costs`` (n_starts,) of the last round (inf where failed); ``noise`` the weighting noise scales;
     ``noise_estimate`` noise scales re-estimated from the residuals; ``quality`` per test: RMSE, max |error|
     and R^2 of the observed signal; ``seconds`` wall time (compile included); ``optima`` other local optima the
@@ -328,6 +329,23 @@ OPTIMUM_COST_PER_PARAMETER = 1.0
 OPTIMUM_DISTANCE = 3.0
 
 
+#: Starts are solved in vmapped batches of this many (one compilation); a batch's run time grows with its size,
+#: since a vmapped solve steps every start until the slowest one finishes.
+START_BATCH = 4
+#: The multi-start stops adding batches once this many converged starts reach the best cost within
+#: :data:`AGREE_COST` (half the sum of squared whitened residuals, i.e. log-likelihood units): further starts
+#: would most likely find that optimum again.
+AGREE_STARTS = 3
+AGREE_COST = 0.1
+
+
+def starts_agree(costs: np.ndarray, converged: np.ndarray) -> bool:
+    """Whether at least :data:`AGREE_STARTS` of the converged starts (``costs`` (n,), ``converged`` (n,) bool)
+    reached the lowest converged cost within :data:`AGREE_COST`."""
+    done = np.asarray(costs)[np.asarray(converged) & np.isfinite(costs)]
+    return bool(done.size >= AGREE_STARTS and np.sum(done <= done.min() + AGREE_COST) >= AGREE_STARTS)
+
+
 def distinct_optima(values: np.ndarray, costs: np.ndarray, converged: np.ndarray, covariance: np.ndarray,
                     best: np.ndarray, best_cost: float) -> list[int]:  # fmt: skip
     """Indices into ``values`` (n, d) of the starts that reached optima other than ``best`` (d,): converged,
@@ -360,9 +378,11 @@ def fit(
     atol: float = 1e-6,
     fixed: dict | None = None,
 ) -> FitResult:
-    """Levenberg-Marquardt from ``n_starts`` points (the prior median, then prior draws), vmapped, best kept.
+    """Levenberg-Marquardt from up to ``n_starts`` points (the prior median, then prior draws), best kept.
 
-    The starts run in rounds of at most ``max_steps`` steps. While the best start so far has not met the
+    The starts are solved in vmapped batches of :data:`START_BATCH`, and no further batch is started once the
+    best few agree (:func:`starts_agree`): ``n_starts`` of the result counts the starts that ran. Within a batch
+    the starts run in rounds of at most ``max_steps`` steps. While the batch's best start has not met the
     solver's tolerance, another round continues every start from where it stopped (a failed start stays
     failed), up to ``max_rounds`` rounds; the compiled program is reused, so a round costs its run time only.
     Each round restarts the damping, so a round must be long enough to get past the first rejected steps (on
@@ -394,31 +414,44 @@ def fit(
 
     if max_rounds < 1:
         raise ValueError(f"max_rounds must be >= 1, got {max_rounds!r}")
-    starts = np.vstack([np.asarray(prior.median_unconstrained())[None], prior.sample(seed, n_starts - 1)])
+    if n_starts < 1:
+        raise ValueError(f"n_starts must be >= 1, got {n_starts!r}")
+    all_starts = np.vstack([np.asarray(prior.median_unconstrained())[None], prior.sample(seed, n_starts - 1)])
     groups = observations.groups
     run = jax.jit(jax.vmap(one, in_axes=(0, None)))
-    failed = np.zeros(n_starts, bool)  # a start that failed in any round stays failed
-    best = None  # (cost, u, jacobian, predictions, converged) of the best start so far, over all rounds
-    rounds = 0
-    while rounds < max_rounds:
-        rounds += 1
-        values, ok, converged, costs, jacs, predictions = run(jnp.asarray(starts), groups)
-        values, converged = np.asarray(values), np.asarray(converged)
-        failed |= ~np.asarray(ok)
-        costs = np.where(failed, np.inf, np.asarray(costs))
-        i = int(np.argmin(costs))
-        if np.isfinite(costs[i]) and (best is None or costs[i] <= best[0]):
-            best = (float(costs[i]), values[i], np.asarray(jacs[i]), [np.asarray(q[i]) for q in predictions],
-                    bool(converged[i]))  # fmt: skip
-        if best is None:
-            raise RuntimeError(
-                f"all {n_starts} least-squares starts failed (non-finite, or the physics solver missed)"
-            )
-        if best[4] or failed.all():
+    size = min(n_starts, START_BATCH)
+    best = None  # (cost, u, jacobian, predictions, converged, rounds) of the best start so far
+    values, costs, converged, failed = (np.zeros((0, all_starts.shape[1])), np.zeros(0), np.zeros(0, bool),
+                                        np.zeros(0, bool))  # fmt: skip
+    for first in range(0, n_starts, size):
+        # One batch shape, one compilation: a last batch short of starts is padded with copies of its last start.
+        taken = all_starts[first : first + size]
+        starts = np.vstack([taken, np.repeat(taken[-1:], size - len(taken), axis=0)])
+        batch_failed = np.zeros(size, bool)  # a start that failed in any round stays failed
+        rounds = 0
+        while rounds < max_rounds:
+            rounds += 1
+            v, ok, conv, c, jacs, predictions = run(jnp.asarray(starts), groups)
+            v, conv = np.asarray(v), np.asarray(conv)
+            batch_failed |= ~np.asarray(ok)
+            c = np.where(batch_failed, np.inf, np.asarray(c))
+            i = int(np.argmin(c))
+            if np.isfinite(c[i]) and (best is None or c[i] <= best[0]):
+                best = (float(c[i]), v[i], np.asarray(jacs[i]), [np.asarray(q[i]) for q in predictions],
+                        bool(conv[i]), rounds)  # fmt: skip
+            if conv[i] or batch_failed.all():
+                break
+            # Every start that has not failed continues from where it stopped; a failed one reruns its last start.
+            starts = np.where(batch_failed[:, None], starts, v)
+        n = len(taken)
+        values = np.vstack([values, v[:n]])
+        costs, converged = np.concatenate([costs, c[:n]]), np.concatenate([converged, conv[:n]])
+        failed = np.concatenate([failed, batch_failed[:n]])
+        if starts_agree(costs, converged & ~failed):
             break
-        # Every start that has not failed continues from where it stopped; a failed one reruns its last start.
-        starts = np.where(failed[:, None], starts, values)
-    cost, u, jac, predicted, best_converged = best
+    if best is None:
+        raise RuntimeError(f"all {len(costs)} least-squares starts failed (non-finite, or the physics solver missed)")
+    cost, u, jac, predicted, best_converged, rounds = best
     covariance = np.linalg.pinv(jac.T @ jac)
     params = {k: float(v) for k, v in {**fixed, **prior.from_unconstrained(u)}.items()}
     others = distinct_optima(values, costs, converged & ~failed, covariance, u, cost)
@@ -429,7 +462,7 @@ def fit(
         params=params,
         covariance=covariance,
         cost=cost,
-        n_starts=n_starts,
+        n_starts=len(costs),
         n_failed=int(failed.sum()),
         n_step_limit=int(np.sum(~failed & ~converged)),
         converged=best_converged,
@@ -449,6 +482,9 @@ __all__ = [
     "FitResult",
     "NOISE_CONSISTENCY_SE",
     "QUIET_TESTS",
+    "AGREE_COST",
+    "AGREE_STARTS",
+    "START_BATCH",
     "dense_jacobian",
     "distinct_optima",
     "fit",
@@ -461,5 +497,6 @@ __all__ = [
     "structured_tests",
     "residual_function",
     "sensor_noise",
+    "starts_agree",
     "structured_lag1",
 ]
