@@ -14,15 +14,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from bench_inference import sampled_posterior  # noqa: E402
+from bench_inference import sampled_posterior
 
 BATCHES = (21, 42, 84, 168)
 

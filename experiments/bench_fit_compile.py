@@ -42,8 +42,8 @@ from peano_bayes.inference.fit import (  # noqa: E402
     dense_jacobian,
     residual_function,
 )
-from peano_bayes.inference.likelihood import prepare  # noqa: E402
-from peano_bayes.inference.priors import prior_for  # noqa: E402
+from peano_bayes.inference.prior_files import prior_for  # noqa: E402
+from peano_bayes.inference.reduce import prepare  # noqa: E402
 from peano_bayes.validation.discovery_benchmark import TRUTH_PARAMS, Case, hidden_dataset  # noqa: E402
 
 QUASI_STATIC = ("load_cycle", "blocking", "stroke")

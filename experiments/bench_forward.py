@@ -14,19 +14,14 @@ import argparse
 import json
 import os
 import platform
-import sys
 import time
-from pathlib import Path
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+import numpy_load_cycle
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-import numpy_load_cycle  # noqa: E402
-
-from peano_bayes.physics import (  # noqa: E402
+from peano_bayes.physics import (
     DEFAULT_CONFIG,
     Blocking,
     LoadCycle,

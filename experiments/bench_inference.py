@@ -7,7 +7,7 @@ blocking and stroke tests of two specimens, the configured model, population val
 and their spread, the noise scales, the fitted inputs' error linearised at the exact-input mode (18 parameters
 for TP).
 
-- **ours**: :func:`peano_bayes.pipeline.infer` as the command line runs it (least squares, posterior mode, four
+- **ours**: :func:`peano_bayes.app.pipeline.infer` as the command line runs it (least squares, posterior mode, four
   ensembles to the convergence gates). Its sampling seconds include the warm-up; least squares, the mode and the
   compilation are timed apart. ESS is the tool's (arviz bulk ESS, every walker a chain, minimum over parameters),
   and, as a cross-check, walker-draws / tau_max.
@@ -35,7 +35,6 @@ from __future__ import annotations
 import argparse
 import json
 import platform
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -45,28 +44,19 @@ import emcee
 import jax
 import jax.numpy as jnp
 import numpy as np
+import numpy_load_cycle
+from reference_run import MAX_END_SD, agreement
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-import numpy_load_cycle  # noqa: E402
-from reference_run import MAX_END_SD, agreement  # noqa: E402
-
-from peano_bayes.bundled import dataset_path  # noqa: E402
-from peano_bayes.data import load  # noqa: E402
-from peano_bayes.discovery.choice import configured_model  # noqa: E402
-from peano_bayes.inference import build_posterior, prepare  # noqa: E402
-from peano_bayes.inference.laplace import _laplace_covariance, finite_difference_hessian  # noqa: E402
-from peano_bayes.inference.posterior import DEFAULT_HELD  # noqa: E402
-from peano_bayes.jax_config import enable_compilation_cache  # noqa: E402
-from peano_bayes.physics import LoadCycle, simulate_load_cycle  # noqa: E402
-from peano_bayes.pipeline import (  # noqa: E402
-    DEFAULT_MAX_STEPS,
-    DEFAULT_TESTS,
-    _linearisation_point,
-    infer,
-    prior_of,
-    select_tests,
-)
+from peano_bayes.app.pipeline import DEFAULT_MAX_STEPS, DEFAULT_TESTS, infer, prior_of, select_tests
+from peano_bayes.bundled import dataset_path
+from peano_bayes.data import load
+from peano_bayes.discovery.choice import configured_model
+from peano_bayes.inference import build_posterior, prepare
+from peano_bayes.inference.driver import _linearisation_point
+from peano_bayes.inference.laplace import _laplace_covariance, finite_difference_hessian
+from peano_bayes.inference.posterior import DEFAULT_HELD
+from peano_bayes.jax_config import enable_compilation_cache
+from peano_bayes.physics import LoadCycle, simulate_load_cycle
 
 SEED = 0
 

@@ -28,9 +28,9 @@ import numpy as np
 
 from peano_bayes.bundled import DATA_DIR, dataset_path
 from peano_bayes.data import load
-from peano_bayes.inference.likelihood import prepare
 from peano_bayes.inference.posterior import build_posterior
-from peano_bayes.inference.priors import prior_for
+from peano_bayes.inference.prior_files import prior_for
+from peano_bayes.inference.reduce import prepare
 
 
 def timed(fn, arg, repeats: int) -> tuple[float, float]:

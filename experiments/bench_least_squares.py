@@ -1,7 +1,7 @@
 """Does the multi-start least squares converge? Per dataset: whether the best start met the solver's tolerance
 and in how many rounds, how many starts failed or stopped at the step limit, the cost and the wall time.
 
-The fits are the ones ``peano-bayes fit`` and ``run`` make (:func:`peano_bayes.pipeline.least_squares` on the
+The fits are the ones ``peano-bayes fit`` and ``run`` make (:func:`peano_bayes.inference.driver.least_squares` on the
 default tests, the bundled prior of the material, 16 starts, seed 0). Datasets: the bundled files
 (``--materials``; a bare ``--materials`` for none), and with ``--user-like`` a file such as a user's rig gives:
 FC's generating values tested at 1200 kPa (forces to about 230 N; ``--user-like-kpa 2800``: about 300 N),
@@ -24,14 +24,15 @@ import json
 
 import numpy as np
 
+from peano_bayes.app.pipeline import prior_of, select_tests
 from peano_bayes.bundled import MATERIALS, dataset_path
 from peano_bayes.data import Dataset, load
 from peano_bayes.defaults import DEFAULT_STARTS, DEFAULT_TESTS
-from peano_bayes.inference.likelihood import prepare
+from peano_bayes.inference.driver import least_squares
 from peano_bayes.inference.posterior import DEFAULT_HELD, build_posterior
+from peano_bayes.inference.reduce import prepare
 from peano_bayes.materials import material
 from peano_bayes.physics import ModelConfig
-from peano_bayes.pipeline import least_squares, prior_of, select_tests
 from peano_bayes.rig import DEFAULT_PROTOCOL, simulate_dataset
 
 USER_LIKE_PRESSURE_PA = 1200e3

@@ -6,7 +6,7 @@ Dask LocalCluster, and the per-unit overhead of each executor.
 
 Each configuration runs the same ``--replicates`` SBC replicates (``peano_bayes.validation.sbc.replicate_unit``,
 root seed 20261126, ``--walkers`` walkers, warm-up and chunk of ``--steps`` / 3, at most ``--steps`` steps)
-through ``peano_bayes.fanout.run_units`` with fresh workers, so each worker's tracing and cache loading is in
+through ``peano_bayes.app.fanout.run_units`` with fresh workers, so each worker's tracing and cache loading is in
 its time, as it is in a real study. The persistent compilation cache is warmed first by one replicate in a
 worker process (not counted). Configurations, side by side in one run:
 
@@ -32,7 +32,7 @@ import multiprocessing
 import time
 
 from peano_bayes import enable_compilation_cache
-from peano_bayes.fanout import Unit, cap_threads, make_executor, run_units
+from peano_bayes.app.fanout import Unit, cap_threads, make_executor, run_units
 from peano_bayes.validation.sbc import replicate_unit
 
 SEED = 20261126

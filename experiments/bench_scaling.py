@@ -21,9 +21,9 @@ import tomllib
 import numpy as np
 
 from peano_bayes.bundled import DATA_DIR
-from peano_bayes.inference.likelihood import prepare
 from peano_bayes.inference.posterior import build_posterior
-from peano_bayes.inference.priors import prior_for
+from peano_bayes.inference.prior_files import prior_for
+from peano_bayes.inference.reduce import prepare
 from peano_bayes.rig import RigProtocol, simulate_dataset
 
 TESTS = ("load_cycle", "blocking", "stroke")

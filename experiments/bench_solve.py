@@ -27,24 +27,20 @@ import argparse
 import json
 import os
 import platform
-import sys
 import time
-from pathlib import Path
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from peano_bayes.bundled import dataset_path  # noqa: E402
-from peano_bayes.data import load  # noqa: E402
-from peano_bayes.discovery.choice import configured_model  # noqa: E402
-from peano_bayes.inference import prepare  # noqa: E402
-from peano_bayes.inference.likelihood import _simulate  # noqa: E402
-from peano_bayes.jax_config import enable_compilation_cache  # noqa: E402
-from peano_bayes.physics import simulate  # noqa: E402
-from peano_bayes.pipeline import DEFAULT_TESTS, prior_of, select_tests  # noqa: E402
+from peano_bayes.app.pipeline import DEFAULT_TESTS, prior_of, select_tests
+from peano_bayes.bundled import dataset_path
+from peano_bayes.data import load
+from peano_bayes.discovery.choice import configured_model
+from peano_bayes.inference import prepare
+from peano_bayes.inference.likelihood import _simulate
+from peano_bayes.jax_config import enable_compilation_cache
+from peano_bayes.physics import simulate
 
 QUASI_STATIC = ("load_cycle", "blocking", "stroke")
 

@@ -3,12 +3,12 @@
 For each material (Table 4) a few parameters are freed (log-parameters inside a physically sensible box,
 much narrower than ``PARAMETERS`` bounds) and fitted by least squares so that the Table 3 metrics measured
 from **noise-free virtual-rig signals** (``peano_bayes.rig.simulate_dataset``, one specimen, no spread, the
-rig's own protocol; metrics from ``peano_bayes.metrics``) match
+rig's own protocol; metrics from ``peano_bayes.analysis.metrics``) match
 ``data/published_metrics.csv``. Residuals are log-ratios over the tolerance (10 % explicit, 20 % approximate,
 30 % ambiguous); orderings (bundled ``published_orderings.csv``) are soft hinge residuals on log-ratios with a
 5 % margin, active once the other material of a pair has been fitted (materials are fitted in ``FIT_ORDER``);
 a weak prior term keeps each freed parameter near its nominal value. The step response is not required to
-overshoot (a hinge on it cost the 30 kPa fits too much); ``peano_bayes.metrics.smoothed_step_metrics`` times a
+overshoot (a hinge on it cost the 30 kPa fits too much); ``peano_bayes.analysis.metrics.smoothed_step_metrics`` times a
 response without overshoot to 99 % of its rise.
 
 Stiffness at -1.5 % (0 kPa) is fitted on a dedicated noise-free 0 kPa stretch from 0 to -3 % strain, because the
@@ -36,11 +36,11 @@ import jax
 import numpy as np
 from scipy.optimize import least_squares
 
-from peano_bayes import bundled  # noqa: E402
-from peano_bayes import metrics as table3  # noqa: E402
-from peano_bayes.metrics import NOISELESS, STIFFNESS, zero_kpa_stiffness  # noqa: E402, F401
-from peano_bayes.physics import DEFAULT_CONFIG, PARAMETERS, ModelConfig  # noqa: E402
-from peano_bayes.rig import RigSimulationError  # noqa: E402
+from peano_bayes import bundled
+from peano_bayes.analysis import metrics as table3
+from peano_bayes.analysis.metrics import NOISELESS, STIFFNESS, zero_kpa_stiffness  # noqa: F401
+from peano_bayes.physics import DEFAULT_CONFIG, PARAMETERS, ModelConfig
+from peano_bayes.rig import RigSimulationError
 
 jax.config.update("jax_enable_x64", True)
 
@@ -71,7 +71,8 @@ FREE_EXTRA = {code: {"damping_up_ns_per_m": (1.0, 3e3)} for code in ("PR", "PC",
 EXTRA_QUIRKS = {code: ("nonlinear_damping",) for code in ("PR", "PC", "PCS")}
 #: Relative tolerance by kind of published number.
 TOLERANCE = {"explicit": 0.10, "approximate": 0.20, "ambiguous": 0.30}
-#: Metric names of published_metrics.csv -> names of peano_bayes.metrics.METRIC_UNITS (identical except stiffness).
+#: Metric names of published_metrics.csv -> names of peano_bayes.analysis.metrics.METRIC_UNITS
+#: (identical except stiffness).
 ORDER_MARGIN = 0.05
 EQUAL_BAND = 0.10
 PRIOR_WEIGHT = 0.05
@@ -146,7 +147,7 @@ def free_box(code: str) -> dict[str, tuple[float, float]]:
 
 def model_metrics(code: str, params: dict) -> dict[str, float]:
     """Table 3 metrics of noise-free rig signals of one specimen of ``code`` with ``params`` [SI units]
-    (:func:`peano_bayes.metrics.model_metrics` under the material's configuration and quirks)."""
+    (:func:`peano_bayes.analysis.metrics.model_metrics` under the material's configuration and quirks)."""
     config, quirks = config_for(code)
     return table3.model_metrics(code, params, config=config, quirks=quirks)
 

@@ -22,18 +22,12 @@ import argparse
 import json
 import math
 import os
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
-from scipy.optimize import least_squares
-
-from peano_bayes.rig import RigSimulationError
-
-sys.path.insert(0, str(Path(__file__).parent))
-from calibrate import (  # noqa: E402
+from calibrate import (
     CACHE,
     EQUAL_BAND,
     ORDERINGS,
@@ -42,6 +36,9 @@ from calibrate import (  # noqa: E402
     read_targets,
     residuals,
 )
+from scipy.optimize import least_squares
+
+from peano_bayes.rig import RigSimulationError
 
 OUT = Path(__file__).parent / "datasets" / "calibration_tradeoffs.json"
 #: Weight of the forcing hinge against the calibration's own residuals (each ~1 at a tolerance edge).

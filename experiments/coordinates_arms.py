@@ -20,8 +20,8 @@ import json
 from pathlib import Path
 
 from peano_bayes import bundled, enable_compilation_cache
-from peano_bayes.fanout import Unit, make_executor, raise_failures, run_units
-from peano_bayes.pipeline import infer
+from peano_bayes.app.fanout import Unit, make_executor, raise_failures, run_units
+from peano_bayes.app.pipeline import infer
 
 ARMS = ("theta", "tensile_stretch")
 

@@ -18,11 +18,11 @@ import sys
 from pathlib import Path
 
 from peano_bayes import bundled, enable_compilation_cache
+from peano_bayes.app.pipeline import BUNDLED_MATERIALS
 from peano_bayes.atomic import write_text
 from peano_bayes.data import load
 from peano_bayes.discovery import Gates, discover, discovery_data, write_report
-from peano_bayes.discovery.effects import PHYSICS_EFFECTS
-from peano_bayes.pipeline import BUNDLED_MATERIALS
+from peano_bayes.effects import PHYSICS_EFFECTS
 
 HERE = Path(__file__).resolve().parent
 TESTS = ("load_cycle", "blocking", "stroke")

@@ -15,7 +15,7 @@ the current workflow is ``discrepancy-14000/`` (seeds 14000-14039, SNR 2, every 
 12000-12039 and 13000-13039) were stopped before any table and withdrawn (that file says why). A later workflow
 change's final run starts at ``--first-seed 15000``; tuning seeds from 20002.
 
-Runs are work units of ``peano_bayes.fanout`` (``--jobs`` local processes, or a Dask cluster with
+Runs are work units of ``peano_bayes.app.fanout`` (``--jobs`` local processes, or a Dask cluster with
 ``--scheduler``). Resumable: this process appends every finished run as one line of ``OUT/runs.jsonl``; a rerun
 skips what is there (earlier runs wrote one ``runs-<worker>.jsonl`` per worker, and the committed ones store
 their rows gzip-compressed, ``runs-<worker>.jsonl.gz``; all are read the same way). Writes
@@ -37,9 +37,9 @@ import numpy as np
 import pandas as pd
 
 from peano_bayes import enable_compilation_cache
+from peano_bayes.app.fanout import Unit, make_executor, run_units
 from peano_bayes.atomic import write_text
 from peano_bayes.errors import PeanoBayesInputError
-from peano_bayes.fanout import Unit, make_executor, run_units
 from peano_bayes.validation.discovery_benchmark import (
     HIDEABLE,
     NOT_HIDEABLE,
@@ -139,7 +139,7 @@ def run(
     scheduler=None,
     fresh_workers: bool = True,
 ) -> list[dict]:
-    """Calibrate the strengths, then run the to-do list as work units of ``peano_bayes.fanout`` (``jobs`` local
+    """Calibrate the strengths, then run the to-do list as work units of ``peano_bayes.app.fanout`` (``jobs`` local
     processes, a new one for each run when ``fresh_workers``, or the Dask cluster of ``scheduler``). This
     process alone appends each finished run to ``OUT/runs.jsonl``; a run that raised is recorded as a wrong row,
     not hidden."""

@@ -35,12 +35,11 @@ import sys
 from collections import Counter
 from pathlib import Path
 
-from peano_bayes.atomic import write_text
-from peano_bayes.discovery.effects import LIBRARY
-from peano_bayes.discovery.workflow import Gates
+from discrepancy_benchmark import log_rows, run_logs
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from discrepancy_benchmark import log_rows, run_logs  # noqa: E402
+from peano_bayes.atomic import write_text
+from peano_bayes.discovery.workflow import Gates
+from peano_bayes.effects import LIBRARY
 
 
 def single_gate_failures(rows) -> Counter:

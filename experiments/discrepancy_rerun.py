@@ -20,14 +20,12 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import sys
 from pathlib import Path
+
+from discrepancy_benchmark import case_of_row, log_rows, run_logs
 
 from peano_bayes import enable_compilation_cache
 from peano_bayes.validation.discovery_benchmark import run_case
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from discrepancy_benchmark import case_of_row, log_rows, run_logs  # noqa: E402
 
 #: Fields that differ on every run by design.
 IGNORED = frozenset({"seconds"})

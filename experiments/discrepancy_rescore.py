@@ -15,13 +15,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
-from peano_bayes.discovery.workflow import Gates, identified
+from discrepancy_benchmark import log_rows, run_logs
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from discrepancy_benchmark import log_rows, run_logs  # noqa: E402
+from peano_bayes.discovery.workflow import Gates, identified
 
 
 def rescore(out: Path, gates: Gates | None = None) -> dict:

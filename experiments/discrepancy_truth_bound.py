@@ -30,12 +30,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from discrepancy_benchmark import case_of_row, log_rows, run_logs
 
 from peano_bayes import enable_compilation_cache
 from peano_bayes.atomic import write_text
@@ -44,9 +44,6 @@ from peano_bayes.discovery.fitting import evaluate, fit_models
 from peano_bayes.discovery.model import DEFAULT_BASE
 from peano_bayes.discovery.workflow import BASE_CONTINUATIONS, Discovery, Gates, fit_base
 from peano_bayes.validation.discovery_benchmark import HIDEABLE, hidden_dataset, run_key, true_model, truth_gap
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from discrepancy_benchmark import case_of_row, log_rows, run_logs  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 TARGET = 0.5

@@ -24,9 +24,10 @@ import numpy as np
 
 from peano_bayes.bundled import dataset_path
 from peano_bayes.data import load
-from peano_bayes.inference.likelihood import group_log_likelihood, prepare, whitened_residuals
+from peano_bayes.inference.likelihood import group_log_likelihood, whitened_residuals
 from peano_bayes.inference.posterior import build_posterior
-from peano_bayes.inference.priors import prior_for
+from peano_bayes.inference.prior_files import prior_for
+from peano_bayes.inference.reduce import prepare
 from peano_bayes.inference.results import SPECIMEN_PREFIX
 
 

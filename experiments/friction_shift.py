@@ -17,20 +17,17 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import sys
-from pathlib import Path
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from make_datasets import read_truth
 
-from peano_bayes.inference.likelihood import group_log_likelihood, prepare
+from peano_bayes.inference.likelihood import group_log_likelihood
 from peano_bayes.inference.posterior import build_posterior
-from peano_bayes.inference.priors import prior_for
+from peano_bayes.inference.prior_files import prior_for
+from peano_bayes.inference.reduce import prepare
 from peano_bayes.rig import RigNoise, simulate_dataset
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from make_datasets import read_truth  # noqa: E402
 
 PAIR = ("friction_force_n", "friction_pressure_fraction")
 

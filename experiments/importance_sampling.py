@@ -32,13 +32,14 @@ import arviz as az
 import numpy as np
 
 from peano_bayes import enable_compilation_cache
+from peano_bayes.app.pipeline import prior_of, select_tests
 from peano_bayes.bundled import dataset_path
 from peano_bayes.data import load
+from peano_bayes.inference.driver import posterior_at_mode, walker_start
 from peano_bayes.inference.laplace import NonCentred, _in_eta
-from peano_bayes.inference.likelihood import prepare
 from peano_bayes.inference.posterior import DEFAULT_HELD, build_posterior
+from peano_bayes.inference.reduce import prepare
 from peano_bayes.inference.sample import IndependenceProposal
-from peano_bayes.pipeline import posterior_at_mode, prior_of, select_tests, walker_start
 
 
 def t_draws(rng, proposal: IndependenceProposal, n: int):

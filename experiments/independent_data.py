@@ -5,7 +5,7 @@ about data from elsewhere. Here the data come from Veale's force-balance model (
 the paper's Table 2 values: the rig's quasi-static protocol (load cycles, blocking, stroke) on two specimens
 whose stiffnesses differ by the rig's log-normal spread, with the rig's sensor noise
 (:func:`peano_bayes.rig.simulate_veale_dataset`). The default engine fits and samples it exactly as
-``peano-bayes fit`` does (:func:`peano_bayes.pipeline.infer`). No parameter of one model maps onto the
+``peano-bayes fit`` does (:func:`peano_bayes.app.pipeline.infer`). No parameter of one model maps onto the
 other, so what is checked is what both predict: the **blocking force** and the **free strain** at each of
 ``--fractions`` of the test pressure. Veale's population muscle (Table 2 values, no specimen factor) gives the
 truth. Our prediction is the 94 % interval for a **new specimen**: the posterior draws with the between-specimen
@@ -48,6 +48,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from peano_bayes.app.pipeline import infer
 from peano_bayes.atomic import write_text
 from peano_bayes.data import load, save
 from peano_bayes.defaults import HDI_PROB
@@ -55,7 +56,6 @@ from peano_bayes.inference.results import load_result, parameter_draws, result_c
 from peano_bayes.materials import material
 from peano_bayes.physics.reference import VEALE_TABLE2, veale_blocking_force, veale_free_strain
 from peano_bayes.physics.simulate import static_force, static_strain
-from peano_bayes.pipeline import infer
 from peano_bayes.rig import simulate_veale_dataset
 
 MATERIAL = "FC"

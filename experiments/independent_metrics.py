@@ -2,11 +2,11 @@
 
 ``experiments/independent_data.py`` fits rig data made by Veale's force-balance model and checks two static
 quantities with the study script's own model-discrepancy term. This script asks the same of what a user reads:
-``peano-bayes metrics`` (:func:`peano_bayes.metrics.evaluate_result`) on that fitted result, at each of
+``peano-bayes metrics`` (:func:`peano_bayes.analysis.metrics.evaluate_result`) on that fitted result, at each of
 ``FRACTIONS`` of FC's test pressure, with the discrepancy the tool adds where a fitted test misfits with
 structure (``metrics.READ_OFF``). The truth of each metric is what the rig measures on Veale's population muscle
 (Table 2 values, one specimen, no noise) under the same protocol at that pressure, by the same Table 3
-definitions (:func:`peano_bayes.metrics.dataset_metrics`), so both sides use one measurement rule (the free
+definitions (:func:`peano_bayes.analysis.metrics.dataset_metrics`), so both sides use one measurement rule (the free
 strain, for instance, extrapolates the relaxing load cycle from the start tension to zero force).
 
 The data's load cycles were taken at FC's test pressure (200 kPa) only; at the lower pressures the load-cycle
@@ -36,8 +36,8 @@ import json
 from dataclasses import replace
 from pathlib import Path
 
+from peano_bayes.analysis.metrics import NOISELESS, dataset_metrics, evaluate_result
 from peano_bayes.materials import MATERIALS
-from peano_bayes.metrics import NOISELESS, dataset_metrics, evaluate_result
 from peano_bayes.rig import simulate_veale_dataset
 
 MATERIAL = "FC"

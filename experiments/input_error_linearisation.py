@@ -20,12 +20,13 @@ import time
 import numpy as np
 
 from peano_bayes import bundled, enable_compilation_cache
+from peano_bayes.app.pipeline import prior_of, select_tests
 from peano_bayes.data import load
 from peano_bayes.defaults import DEFAULT_TESTS
+from peano_bayes.inference.driver import least_squares, walker_start
 from peano_bayes.inference.laplace import posterior_mode
-from peano_bayes.inference.likelihood import prepare
 from peano_bayes.inference.posterior import DEFAULT_HELD, build_posterior
-from peano_bayes.pipeline import least_squares, prior_of, select_tests, walker_start
+from peano_bayes.inference.reduce import prepare
 
 
 def per_evaluation_ms(f, thetas: np.ndarray, repeats: int = 3) -> float:

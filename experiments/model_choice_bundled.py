@@ -2,7 +2,7 @@
 
 The generating elements of each bundled file are its ``config_*`` entries and physics ``quirks`` in
 ``peano_bayes/bundled/data/true_parameters.toml``, read as library effects
-(:func:`peano_bayes.discovery.choice.effects_in`); an effect is visible in the fitted tests when one of them is
+(:func:`peano_bayes.effects.effects_in`); an effect is visible in the fitted tests when one of them is
 among the tests its signature shows in (``Effect.shows_in``). The sampled model is read from each material's
 ``summary.json`` in RESULTS (``model.effects``, written by ``peano-bayes run``/``fit``; with discovery it
 holds what discovery added) or, without RESULTS, is the configured model (the prior's ``[config]``), which
@@ -26,14 +26,14 @@ import tomllib
 from importlib import resources
 from pathlib import Path
 
+from peano_bayes.app.pipeline import select_tests
 from peano_bayes.bundled import dataset_path
 from peano_bayes.data import load
 from peano_bayes.defaults import DEFAULT_TESTS
-from peano_bayes.discovery.choice import choice_from_report, choose_model, effects_in
-from peano_bayes.discovery.effects import LIBRARY
-from peano_bayes.inference.priors import load_prior
+from peano_bayes.discovery.choice import choice_from_report, choose_model
+from peano_bayes.effects import LIBRARY, effects_in
+from peano_bayes.inference.prior_files import load_prior
 from peano_bayes.physics.model import ModelConfig
-from peano_bayes.pipeline import select_tests
 
 
 def generating_effects(entry: dict) -> set[str]:

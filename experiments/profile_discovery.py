@@ -12,20 +12,16 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import tempfile
 import time
-from pathlib import Path
 
 import jax
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-import peano_bayes.discovery.fitting as fitting  # noqa: E402
-from peano_bayes.bundled import dataset_path  # noqa: E402
-from peano_bayes.data import load  # noqa: E402
-from peano_bayes.discovery.choice import choose_model  # noqa: E402
-from peano_bayes.pipeline import DEFAULT_TESTS, prior_of, select_tests  # noqa: E402
+import peano_bayes.discovery.fitting as fitting
+from peano_bayes.app.pipeline import DEFAULT_TESTS, prior_of, select_tests
+from peano_bayes.bundled import dataset_path
+from peano_bayes.data import load
+from peano_bayes.discovery.choice import choose_model
 
 PROGRAMS = {"solve": "_solve", "jacobian": "_jacobian", "evaluate": "_pointwise"}
 

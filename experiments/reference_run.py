@@ -36,8 +36,8 @@ import arviz as az
 import numpy as np
 
 from peano_bayes import enable_compilation_cache
+from peano_bayes.app.pipeline import infer
 from peano_bayes.bundled import dataset_path
-from peano_bayes.pipeline import infer
 
 #: The rule for "the same posterior", in units of the reference's sd.
 MAX_MEAN_SD, MAX_END_SD = 0.1, 0.2

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-import peano_bayes.pipeline as pipeline
+import peano_bayes.app.pipeline as pipeline
 from peano_bayes import bundled, enable_compilation_cache
 from peano_bayes.data import load
 from peano_bayes.inference.fit import lag1_sums, residual_correlation

@@ -8,7 +8,7 @@ Each replicate draws parameters from the prior, runs the virtual rig with them a
 posterior-mode start and emcee sampler as ``peano-bayes fit`` (see ``peano_bayes.validation.sbc`` for the
 reduced problem). Replicates are appended to ``OUT/replicates.jsonl`` as they finish, so an interrupted study
 continues where it stopped; the summary (``OUT/coverage.csv``, ``OUT/SBC.md``, ``OUT/ranks.png``) is
-rewritten atomically at the end. Replicates are work units of ``peano_bayes.fanout`` (``--jobs`` local
+rewritten atomically at the end. Replicates are work units of ``peano_bayes.app.fanout`` (``--jobs`` local
 processes, or a Dask cluster with ``--scheduler``); this process alone appends their rows, and the summary is
 ordered by replicate index, so it is the same however the replicates were spread. ``--exact-inputs`` runs the
 same study with noiseless strain and pressure sensors (a control: the likelihood treats the denoised inputs as
@@ -30,9 +30,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from peano_bayes.app.fanout import Unit, make_executor, raise_failures, run_units
 from peano_bayes.atomic import write_text
 from peano_bayes.errors import PeanoBayesInputError
-from peano_bayes.fanout import Unit, make_executor, raise_failures, run_units
 from peano_bayes.validation.sbc import (
     LEVELS,
     RANK_DRAWS,
@@ -108,7 +108,7 @@ def markdown(
 def rank_figure(replicates: list[dict], names, path: Path) -> None:
     import matplotlib.pyplot as plt
 
-    from peano_bayes.figures import save
+    from peano_bayes.report.figures import save
 
     ranks = np.array([r["rank"] for r in replicates])
     fig, axes = plt.subplots(1, len(names), figsize=(3.0 * len(names), 2.6), sharey=True)

@@ -9,7 +9,7 @@ minutes, so likelihood variants can be compared on the same replicates before a 
 
 - ``exact-inputs-likelihood``: the load cycles' fitted driving inputs taken as exact (``input_errors`` empty);
 - ``input-error``: the package's likelihood (the fitted inputs' error integrated out in the tests of
-  :data:`~peano_bayes.inference.likelihood.INPUT_ERROR_TESTS`);
+  :data:`~peano_bayes.inference.reduce.INPUT_ERROR_TESTS`);
 - ``noiseless-inputs``: the rig's strain and pressure sensors noiseless, so the fitted inputs are exact (the
   ceiling either likelihood can reach).
 
@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from peano_bayes.inference.laplace import NonCentred, posterior_mode, refine_mode
-from peano_bayes.inference.likelihood import INPUT_ERROR_TESTS, prepare
+from peano_bayes.inference.reduce import INPUT_ERROR_TESTS, prepare
 from peano_bayes.validation import sbc
 
 VARIANTS = {

@@ -40,19 +40,17 @@ from pathlib import Path
 import jax.numpy as jnp
 import numpy as np
 import pandas as pd
+from discrepancy_benchmark import cases
 
 from peano_bayes import enable_compilation_cache
 from peano_bayes.atomic import write_text
 from peano_bayes.discovery import discovery_data
 from peano_bayes.discovery.diagnose import diagnose, sign_flip_p, sign_flips, signature_statistic
-from peano_bayes.discovery.effects import LIBRARY
 from peano_bayes.discovery.fitting import _jacobian, _pointwise, evaluate
 from peano_bayes.discovery.model import DEFAULT_BASE
 from peano_bayes.discovery.workflow import Gates, _start, fit_base
+from peano_bayes.effects import LIBRARY
 from peano_bayes.validation.discovery_benchmark import hidden_dataset, run_key
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from discrepancy_benchmark import cases  # noqa: E402
 
 #: Cases the tuning round of the relaxation signature needs: the effect, those it is confused with, the nulls.
 DEFAULT_CASES = (

@@ -12,30 +12,12 @@ import importlib
 __version__ = "0.2.0"
 
 #: Public name -> module it lives in (loaded on first access, so ``import peano_bayes`` does not import JAX).
-_LAZY = {
-    **{
-        name: "peano_bayes.physics"
-        for name in (
-            "DEFAULT_CONFIG",
-            "PAPER_GEOMETRY",
-            "PAPER_PROPOSED_CONFIG",
-            "PARAMETERS",
-            "Blocking",
-            "Geometry",
-            "LoadCycle",
-            "ModelConfig",
-            "Step",
-            "Stroke",
-            "simulate_blocking",
-            "simulate_load_cycle",
-            "simulate_step",
-            "simulate_stroke",
-            "static_force",
-            "static_strain",
-        )
-    },
-    "enable_compilation_cache": "peano_bayes.jax_config",
-}
+#: Names importable from ``peano_bayes`` itself, loaded from their module on first use (JAX only then).
+_PHYSICS_NAMES = (
+    "DEFAULT_CONFIG PAPER_GEOMETRY PAPER_PROPOSED_CONFIG PARAMETERS Blocking Geometry LoadCycle ModelConfig Step "
+    "Stroke simulate_blocking simulate_load_cycle simulate_step simulate_stroke static_force static_strain"
+).split()
+_LAZY = {**dict.fromkeys(_PHYSICS_NAMES, "peano_bayes.physics"), "enable_compilation_cache": "peano_bayes.jax_config"}
 
 __all__ = ["__version__", *_LAZY]
 

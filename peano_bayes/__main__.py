@@ -2,6 +2,6 @@
 
 import sys
 
-from peano_bayes.cli import main
+from peano_bayes.app.cli import main
 
 sys.exit(main())

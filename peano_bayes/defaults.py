@@ -1,6 +1,6 @@
 """The settings of a fit that the command line shows in its help, kept free of JAX so ``--help`` is instant.
 
-:func:`peano_bayes.pipeline.infer` and :func:`peano_bayes.inference.sample.sample` take their defaults from here.
+:func:`peano_bayes.app.pipeline.infer` and :func:`peano_bayes.inference.sample.sample` take their defaults from here.
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from hypothesis import settings
 
-from peano_bayes.fanout import cap_threads, xla_flags_with
+from peano_bayes.app.fanout import cap_threads, xla_flags_with
 
 # One compute thread per process, set before JAX starts its backend: the suite runs as two xdist workers on two
 # cores, and the Dask workers, notebook kernels and command-line subprocesses that tests start inherit the same
@@ -52,9 +52,9 @@ def recovered():
     """One fit + sample on virtual-rig TP load cycles with known truth (the slow part of the suite; shared by
     the recovery and the metrics tests): ``(posterior, result, draws, truth, fitted)``."""
     from peano_bayes.inference import build_posterior, prepare, prior_for, sample
+    from peano_bayes.inference.driver import least_squares, walker_start
     from peano_bayes.inference.results import physical_draws
     from peano_bayes.physics import DEFAULT_CONFIG
-    from peano_bayes.pipeline import least_squares, walker_start
     from peano_bayes.rig import RigNoise, simulate_dataset
 
     from .helpers import RECOVERY_FREE, recovery_truth

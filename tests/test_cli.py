@@ -11,22 +11,23 @@ from pathlib import Path
 import pytest
 
 import peano_bayes
-from peano_bayes import bundled, pipeline
-from peano_bayes.cli import main
-from peano_bayes.commands import COMMANDS
+from peano_bayes import bundled
+from peano_bayes.analysis.ranking import CRITERIA
+from peano_bayes.app import pipeline
+from peano_bayes.app.cli import main
+from peano_bayes.app.commands import COMMANDS
 from peano_bayes.data import load, save
 from peano_bayes.errors import PeanoBayesInputError
-from peano_bayes.inference.priors import load_prior
+from peano_bayes.inference.prior_files import load_prior
 from peano_bayes.inference.sample import SamplingInterrupted
-from peano_bayes.ranking import CRITERIA
 from peano_bayes.rig import RigSimulationError
 
 
 def test_help_of_every_command_and_version_import_no_jax():
     script = (
         "import sys, contextlib, io\n"
-        "from peano_bayes.cli import build_parser\n"
-        "from peano_bayes.commands import COMMANDS\n"
+        "from peano_bayes.app.cli import build_parser\n"
+        "from peano_bayes.app.commands import COMMANDS\n"
         "parser = build_parser()\n"
         "for argv in (['--help'], ['--version'], *[[name, '--help'] for name in COMMANDS], ['prior', '-h']):\n"
         "    with contextlib.redirect_stdout(io.StringIO()), contextlib.suppress(SystemExit):\n"
@@ -242,7 +243,7 @@ def test_fit_many_refuses_a_bad_prior_or_walker_count_before_writing(own_muscle,
 def test_json_output_is_standard_json_with_null_where_a_value_is_not_finite(monkeypatch, capsys):
     import numpy as np
 
-    from peano_bayes.commands import Command
+    from peano_bayes.app.commands import Command
 
     result = {"nan": float("nan"), "many": [np.float64("inf"), 1.5], "narrow": np.float32(2.5), "n": 3}
     monkeypatch.setitem(COMMANDS, "demo", Command("a stand-in", lambda args: result))
@@ -283,7 +284,7 @@ def test_prior_new_refuses_a_prior_that_would_extend_itself_or_a_stand_in(tmp_pa
 
 
 def test_an_os_error_that_names_no_path_is_a_failed_computation(monkeypatch, capsys):
-    from peano_bayes.commands import Command
+    from peano_bayes.app.commands import Command
 
     def lost(args):
         raise ConnectionRefusedError(111, "Connection refused")
@@ -330,11 +331,11 @@ def test_output_folders_are_checked_before_any_work(tmp_path, capsys):
 def test_the_main_job_runs_discovery_first_unless_told_not_to(tmp_path, monkeypatch):
     """``run`` samples the model discovery chooses for each material by default (``--no-discover``: the configured
     model); ``fit-many``, like ``fit``, only with ``--discover``."""
-    import peano_bayes.pipeline as pipeline
+    import peano_bayes.app.batch as batch
 
     seen = []
-    monkeypatch.setattr(pipeline, "run_bundled", lambda out, **kw: seen.append(("run", kw["discover"])) or [])
-    monkeypatch.setattr(pipeline, "fit_many", lambda paths, out, **kw: seen.append(("many", kw["discover"])) or [])
+    monkeypatch.setattr(batch, "run_bundled", lambda out, **kw: seen.append(("run", kw["discover"])) or [])
+    monkeypatch.setattr(batch, "fit_many", lambda paths, out, **kw: seen.append(("many", kw["discover"])) or [])
     out = str(tmp_path / "r")
     assert main(["run", "--out", out, "--materials", "TP"]) == 0
     assert main(["run", "--out", out, "--materials", "TP", "--no-discover"]) == 0

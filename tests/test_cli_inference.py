@@ -2,7 +2,7 @@
 
 import pytest
 
-from peano_bayes.cli import main
+from peano_bayes.app.cli import main
 
 
 @pytest.mark.parametrize(

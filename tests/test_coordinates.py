@@ -8,7 +8,7 @@ import pytest
 
 from peano_bayes.errors import PeanoBayesInputError
 from peano_bayes.inference.coordinates import KA, KB, Identity, TensileStretch, sampler_coordinates
-from peano_bayes.inference.priors import prior_for
+from peano_bayes.inference.prior_files import prior_for
 from peano_bayes.inference.sample import sample
 from tests.test_sample import Gaussian
 

@@ -15,7 +15,7 @@ from typing import NamedTuple
 import numpy as np
 import pytest
 
-from peano_bayes.cli import main
+from peano_bayes.app.cli import main
 from peano_bayes.data import Conditions, DataFormatError, Dataset, Material, Run, dataset_paths, load, save
 from peano_bayes.data.format import COLUMNS, KEYS, TESTS, markdown_tables
 from peano_bayes.physics.geometry import Geometry
@@ -24,9 +24,9 @@ HERE = Path(__file__).parent
 MALFORMED = HERE / "malformed"
 VALID = MALFORMED / "valid.csv"
 DOCS = HERE.parent / "docs" / "data-format.md"
-# ``python -m peano_bayes.cli`` runs cli.py as __main__, a second copy of the module whose command registry
-# the subcommands never fill; the console script (and this) import it once, as ``peano_bayes.cli``.
-CLI = [sys.executable, "-c", "import sys; from peano_bayes.cli import main; sys.exit(main())"]
+# ``python -m peano_bayes.app.cli`` runs cli.py as __main__, a second copy of the module whose command registry
+# the subcommands never fill; the console script (and this) import it once, as ``peano_bayes.app.cli``.
+CLI = [sys.executable, "-c", "import sys; from peano_bayes.app.cli import main; sys.exit(main())"]
 
 
 class Case(NamedTuple):

@@ -16,19 +16,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from peano_bayes.cli import main, strict_json
+from peano_bayes.app.cli import main, strict_json
 from peano_bayes.data import save
 from peano_bayes.discovery import LIBRARY, discovery_data
 from peano_bayes.discovery.data import DISCOVERY_BIN_SIZES, DISCOVERY_EVERY_SAMPLE
 from peano_bayes.discovery.diagnose import diagnose, signature_statistic, signature_weights
-from peano_bayes.discovery.effects import (
-    BASELINE_PARAMETERS,
-    CONFUSABLE,
-    EXTRA_PARAMETERS,
-    FLEXIBLE_TERMS,
-    NOISE_EFFECTS,
-    PHYSICS_EFFECTS,
-)
 from peano_bayes.discovery.fitting import ModelFit, _pointwise
 from peano_bayes.discovery.model import (
     DEFAULT_BASE,
@@ -49,7 +41,16 @@ from peano_bayes.discovery.workflow import (
     within_condition_trend,
     within_two_se,
 )
-from peano_bayes.inference.likelihood import predict, prepare
+from peano_bayes.effects import (
+    BASELINE_PARAMETERS,
+    CONFUSABLE,
+    EXTRA_PARAMETERS,
+    FLEXIBLE_TERMS,
+    NOISE_EFFECTS,
+    PHYSICS_EFFECTS,
+)
+from peano_bayes.inference.likelihood import predict
+from peano_bayes.inference.reduce import prepare
 from peano_bayes.physics import PARAMETERS
 from peano_bayes.validation.discovery_benchmark import (
     HIDEABLE,

@@ -1,4 +1,4 @@
-"""The fan-out seam (peano_bayes.fanout): outcomes in order, errors kept, one writer, schedulers; and, on a Dask
+"""The fan-out seam (peano_bayes.app.fanout): outcomes in order, errors kept, one writer, schedulers; and, on a Dask
 LocalCluster of two workers, two real units (a short fit and an SBC replicate) that survive the loss of a worker
 and equal a serial run with the same seeds."""
 
@@ -13,9 +13,9 @@ import time
 import numpy as np
 import pytest
 
-from peano_bayes.cli import main
+from peano_bayes.app.cli import main
+from peano_bayes.app.fanout import Unit, log_name, make_executor, parse_scheduler, raise_failures, run_units
 from peano_bayes.errors import PeanoBayesError, PeanoBayesInputError
-from peano_bayes.fanout import Unit, log_name, make_executor, parse_scheduler, raise_failures, run_units
 
 
 def _square(x):
@@ -88,7 +88,7 @@ def test_fresh_workers_run_every_unit_in_a_new_process():
 def test_worker_environment_adds_the_thread_flags_once(monkeypatch):
     """A worker started by a capped process gets the same XLA flags, not the one-thread flags twice (JAX's
     persistent cache keys on the flag list: a repeated flag would give the worker's programs other keys)."""
-    from peano_bayes.fanout import ONE_THREAD_XLA_FLAGS, _one_thread_env
+    from peano_bayes.app.fanout import ONE_THREAD_XLA_FLAGS, _one_thread_env
 
     monkeypatch.delenv("XLA_FLAGS", raising=False)
     assert _one_thread_env()["XLA_FLAGS"] == ONE_THREAD_XLA_FLAGS
@@ -161,8 +161,8 @@ def test_units_on_a_dask_cluster_survive_a_killed_worker_and_equal_a_serial_run(
     pytest.importorskip("distributed")
     import arviz as az
 
+    from peano_bayes.app.batch import fit_many, report_results
     from peano_bayes.inference.sample import load_state
-    from peano_bayes.pipeline import fit_many, report_results
 
     data = _data(tmp_path)
     cluster_out, serial_out = tmp_path / "cluster", tmp_path / "serial"

@@ -12,8 +12,11 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from peano_bayes import plots  # noqa: E402
-from peano_bayes.figures import (  # noqa: E402
+from peano_bayes.analysis.metrics import evaluate_result  # noqa: E402
+from peano_bayes.analysis.ranking import rank_materials  # noqa: E402
+from peano_bayes.inference.results import load_result  # noqa: E402
+from peano_bayes.report import plots  # noqa: E402
+from peano_bayes.report.figures import (  # noqa: E402
     cross_material_figures,
     forest_data,
     material_figures,
@@ -22,9 +25,6 @@ from peano_bayes.figures import (  # noqa: E402
     published_data,
     response_runs,
 )
-from peano_bayes.inference.results import load_result  # noqa: E402
-from peano_bayes.metrics import evaluate_result  # noqa: E402
-from peano_bayes.ranking import rank_materials  # noqa: E402
 
 # One xdist worker runs this group, so the session fixture `recovered` (a fit and a sampling run) is built once.
 pytestmark = pytest.mark.xdist_group("recovered")
@@ -97,7 +97,7 @@ def test_predictive_band_of_a_result_holds_its_observed_bins(result_dir):
 def test_ensemble_chains_pool_each_ensembles_walkers():
     import arviz as az
 
-    from peano_bayes.figures import ensemble_chains
+    from peano_bayes.report.figures import ensemble_chains
 
     values = np.arange(8 * 5, dtype=float).reshape(8, 5)  # 8 walkers (chains) x 5 draws
     idata = az.from_dict(posterior={"tensile_ka_n_per_m": values})
@@ -192,7 +192,7 @@ def test_builders_of_nothing_give_nothing(builder):
 
 @pytest.mark.slow
 def test_step_band_spreads_with_the_prior_only_parameters_and_draws_a_figure(result_dir, tmp_path):
-    from peano_bayes.figures import step_band
+    from peano_bayes.report.figures import step_band
     from peano_bayes.rig import simulate_dataset
 
     from .helpers import recovery_truth
@@ -216,7 +216,7 @@ def test_corner_plot_takes_population_values_not_specimen_levels():
     the plot failed)."""
     import arviz as az
 
-    from peano_bayes.figures import physical_names
+    from peano_bayes.report.figures import physical_names
 
     draws = np.zeros((2, 5))
     idata = az.from_dict(

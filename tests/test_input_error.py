@@ -16,10 +16,10 @@ from peano_bayes.inference.likelihood import (
     group_log_likelihood,
     input_error_jacobian,
     linearise_input_error,
-    prepare,
     whitened_residuals,
     with_residual_lag1,
 )
+from peano_bayes.inference.reduce import prepare
 from peano_bayes.physics import DEFAULT_CONFIG
 from peano_bayes.rig import RigNoise, simulate_dataset
 

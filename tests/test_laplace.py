@@ -15,6 +15,7 @@ from peano_bayes.inference.laplace import (
     posterior_mode,
     refine_mode,
 )
+from peano_bayes.inference.status import ModeStatus
 
 
 @dataclass
@@ -60,7 +61,8 @@ def test_a_start_better_than_where_bfgs_ends_is_kept():
     np.testing.assert_array_equal(laplace.mode, np.zeros(2))
     np.testing.assert_array_equal(laplace.covariance, fallback)
     outside = posterior_mode(Cliff(), np.ones(2), fallback)  # a start where the density is 0
-    assert outside.status == "the start's log posterior or its gradient is not finite" and not outside.succeeded
+    assert outside.status is ModeStatus.START_NOT_FINITE and not outside.succeeded
+    assert outside.describe() == "the start's log posterior or its gradient is not finite"
     np.testing.assert_array_equal(outside.mode, np.ones(2))
 
 
@@ -80,7 +82,7 @@ def test_refine_moves_a_mode_of_the_wrong_posterior_to_the_right_one():
     # The start: the mode and covariance of a narrower posterior centred elsewhere (what exact inputs give).
     cov = np.array([[0.04, 0.01, 0.0], [0.01, 0.09, -0.02], [0.0, -0.02, 0.25]])
     mean = np.array([1.0, -3.0, 0.5])
-    start = Laplace(mean + np.array([0.8, -0.9, 1.5]), 0.2 * np.eye(3) * 0.05, 0.0, 0, "", 0.0)
+    start = Laplace(mean + np.array([0.8, -0.9, 1.5]), 0.2 * np.eye(3) * 0.05, 0.0, 0, ModeStatus.SUCCESSFUL, 0.0)
     refined = refine_mode(gaussian_batch(mean, cov), start)
     assert refined.succeeded, refined.status
     # BFGS stops at a whitened gradient norm <= gtol (1e-3), so the Mahalanobis distance to the mode is at most
@@ -92,12 +94,13 @@ def test_refine_moves_a_mode_of_the_wrong_posterior_to_the_right_one():
 
 
 def test_refine_keeps_a_start_it_cannot_improve():
-    start = Laplace(np.zeros(2), np.diag([0.3, 0.2]), -5.0, 7, "", 1.0)
+    start = Laplace(np.zeros(2), np.diag([0.3, 0.2]), -5.0, 7, ModeStatus.SUCCESSFUL, 1.0)
     cliff = lambda x: np.where(np.all(x == 0.0, axis=1), 0.0, -np.inf)  # noqa: E731
     refined = refine_mode(cliff, start)
     np.testing.assert_array_equal(refined.mode, start.mode)
     np.testing.assert_array_equal(refined.covariance, start.covariance)
     assert refined.log_prob == 0.0  # the full posterior's value at the start, not the start's own
+    assert refined.status is ModeStatus.HESSIAN_NOT_FINITE and not refined.succeeded  # a cliff all round
     assert not refined.succeeded
 
 
@@ -106,7 +109,7 @@ def test_refine_keeps_the_start_covariance_when_the_hessian_leaves_the_support()
     inner = gaussian_batch(mean, cov)
     # support x0 <= 0.01: the mode lies on its edge, so a Hessian point past it is -inf
     walled = lambda x: np.where(x[:, 0] <= 0.01, inner(x), -np.inf)  # noqa: E731
-    start = Laplace(np.array([-0.3, 0.4]), np.diag([0.5, 0.5]), 0.0, 0, "", 0.0)
+    start = Laplace(np.array([-0.3, 0.4]), np.diag([0.5, 0.5]), 0.0, 0, ModeStatus.SUCCESSFUL, 0.0)
     refined = refine_mode(walled, start)
     np.testing.assert_array_equal(refined.covariance, start.covariance)
     assert refined.log_prob > float(inner(start.mode[None])[0])
@@ -119,7 +122,7 @@ class Funnel:
     alike (y = 0.01, -0.005). Its joint density is unbounded along c -> 0, tau -> 0."""
 
     def __init__(self):
-        from peano_bayes.inference.priors import prior_for
+        from peano_bayes.inference.prior_files import prior_for
 
         self.marginal = prior_for("TP").marginals["specimen_log_sd"]
         self.prior = type(
@@ -143,7 +146,7 @@ def test_the_non_centred_map_and_its_jacobian_match_finite_differences(transform
     funnel = Funnel()
     coords = NonCentred.of(funnel)
     if transform == "logit":
-        from peano_bayes.inference.priors import prior_for
+        from peano_bayes.inference.prior_files import prior_for
 
         marginal = prior_for("TP").marginals["friction_pressure_fraction"]
         assert marginal.transform == "logit"

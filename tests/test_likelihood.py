@@ -15,17 +15,14 @@ from hypothesis import strategies as st
 
 from peano_bayes.bundled import dataset_path
 from peano_bayes.data import load
-from peano_bayes.inference.likelihood import (
+from peano_bayes.inference.likelihood import group_log_likelihood, log_likelihood, pointwise_log_likelihood, predict
+from peano_bayes.inference.reduce import (
     DEFAULT_BIN_SIZES,
     DEFAULT_BINS_PER_SEGMENT,
     SNAP_SAMPLES,
     Observations,
     _snap,
     bin_means,
-    group_log_likelihood,
-    log_likelihood,
-    pointwise_log_likelihood,
-    predict,
     prepare,
     sample_times,
     segment_bins,

@@ -7,16 +7,16 @@ import arviz as az
 import numpy as np
 import pytest
 
-from peano_bayes.cli import main
-from peano_bayes.errors import PeanoBayesInputError
-from peano_bayes.inference.results import load_result, parameter_draws
-from peano_bayes.metrics import (
+from peano_bayes.analysis.metrics import (
     STEP_METRICS,
     compare_published,
     model_metrics,
     posterior_metrics,
     protocol_material,
 )
+from peano_bayes.app.cli import main
+from peano_bayes.errors import PeanoBayesInputError
+from peano_bayes.inference.results import load_result, parameter_draws
 
 # One xdist worker runs this group, so the session fixture `recovered` (a fit and a sampling run) is built once.
 pytestmark = pytest.mark.xdist_group("recovered")
@@ -147,7 +147,7 @@ def test_metrics_at_a_common_pressure_go_to_their_own_file_and_follow_the_pressu
     assert "simulated at 60 kPa; TP was tested at 30 kPa, so these metrics extrapolate" in capsys.readouterr().err
     at_60 = json.loads((result_dir / "metrics_at_60kPa.json").read_text())
     assert at_60["test_pressure_kpa"] == 60.0 and at_60["own_test_pressure_kpa"] == 30.0 and at_60["published"] == []
-    from peano_bayes.metrics import evaluate_result
+    from peano_bayes.analysis.metrics import evaluate_result
 
     own = evaluate_result(result_dir, n_draws=3, progress=False)
     assert own["test_pressure_kpa"] == own["own_test_pressure_kpa"] == 30.0 and own["published"]
@@ -161,7 +161,7 @@ def test_metrics_of_which_no_draw_could_be_simulated_are_not_written(result_dir,
     import shutil
     from types import SimpleNamespace
 
-    from peano_bayes import metrics
+    from peano_bayes.analysis import metrics
 
     shutil.copy(result_dir / "posterior.nc", tmp_path / "posterior.nc")
     monkeypatch.setattr(metrics, "posterior_metrics", lambda idata, n_draws, **kw: SimpleNamespace(n_failed=n_draws))
@@ -192,7 +192,7 @@ def _summary(structured: dict, consistent: dict = None, adopted: dict = None) ->
 
 
 def test_misfit_discrepancy_is_the_excess_of_the_tests_that_misfit_with_structure():
-    from peano_bayes.metrics import misfit_discrepancy
+    from peano_bayes.analysis.metrics import misfit_discrepancy
 
     summary = _summary({"blocking": 2.0, "stroke": float("nan")}, {"load_cycle": 0.04}, {"step": 0.01})
     assert misfit_discrepancy(summary) == {"blocking": 2.0, "step": 0.01}
@@ -206,7 +206,7 @@ def test_each_metric_gets_the_discrepancy_of_the_test_it_is_read_off_at_its_scal
     force misfit times the free strain and length over the pressure, and the free strain the larger of the stroke
     test's strain misfit and the load cycle's force misfit over the secant slope; slopes and area ratios are
     flagged, a metric of a test that fits keeps its draws, and metrics read off one test move together."""
-    from peano_bayes.metrics import METRIC_UNITS, add_discrepancy
+    from peano_bayes.analysis.metrics import METRIC_UNITS, add_discrepancy
 
     n, pressure_pa, length_m = 40_000, 1.5e5, 0.05
     rng = np.random.default_rng(11)
@@ -253,7 +253,7 @@ def test_metrics_of_a_result_that_misfits_carry_its_discrepancy(result_dir, tmp_
     hysteresis keeps its parameter interval and is flagged, and the table says which is which."""
     import shutil
 
-    from peano_bayes.metrics import evaluate_result, metrics_markdown
+    from peano_bayes.analysis.metrics import evaluate_result, metrics_markdown
 
     shutil.copy(result_dir / "posterior.nc", tmp_path / "posterior.nc")
     (tmp_path / "summary.json").write_text(json.dumps(_summary({"blocking": 3.0, "load_cycle": 1.0})))
@@ -290,7 +290,7 @@ def test_a_malformed_summary_beside_the_result_exits_2_naming_it(result_dir, tmp
 
 
 def test_metrics_written_before_the_discrepancy_existed_are_not_current(tmp_path):
-    from peano_bayes.metrics import METRICS_VERSION, metrics_current
+    from peano_bayes.analysis.metrics import METRICS_VERSION, metrics_current
 
     assert not metrics_current(tmp_path)  # none yet
     (tmp_path / "metrics.json").write_text(json.dumps({"material": "TP", "draws": {}}))
@@ -304,7 +304,7 @@ def test_metrics_written_before_the_discrepancy_existed_are_not_current(tmp_path
 
 
 def test_a_draw_whose_scale_is_undefined_takes_the_median_sd_of_the_others():
-    from peano_bayes.metrics import METRIC_UNITS, add_discrepancy
+    from peano_bayes.analysis.metrics import METRIC_UNITS, add_discrepancy
 
     values = {name: np.full(5, 0.5) for name in METRIC_UNITS}
     values["free_strain"] = np.array([0.1, 0.2, 0.3, 0.2, 0.2])
@@ -321,7 +321,7 @@ def test_a_draw_whose_scale_is_undefined_takes_the_median_sd_of_the_others():
 def test_rank_recomputes_metrics_of_an_older_version_with_as_many_draws(result_dir, tmp_path, capsys):
     import shutil
 
-    from peano_bayes.metrics import METRICS_VERSION
+    from peano_bayes.analysis.metrics import METRICS_VERSION
 
     result = tmp_path / "TP"
     result.mkdir()

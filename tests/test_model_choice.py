@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from peano_bayes.discovery.choice import adopt, choice_from_report, configured_model, effects_in
-from peano_bayes.discovery.effects import LIBRARY, PHYSICS_EFFECTS
+from peano_bayes.discovery.choice import choice_from_report, configured_model
+from peano_bayes.effects import LIBRARY, PHYSICS_EFFECTS, adopt, effects_in
 from peano_bayes.physics.model import PARAMETERS, ModelConfig
 
 #: A model with no element a library effect can switch on (the flow law is always present).
@@ -93,7 +93,7 @@ def test_naming_the_inlet_restriction_keeps_a_laminar_inlet():
 
 
 def test_index_shows_the_sampled_model_beside_what_discovery_named():
-    from peano_bayes.pipeline import model_table
+    from peano_bayes.report.index import model_table
 
     report = {"verdict": "named", "named": ["series_compliance"], "described": [], "structure_left": True}
     found = choice_from_report(BARE, report, "discovery")  # as a fit records it: relative to its result folder
@@ -112,9 +112,9 @@ def test_index_shows_the_sampled_model_beside_what_discovery_named():
 
 def test_a_resumed_fit_reads_the_discovery_report_instead_of_running_discovery(tmp_path, monkeypatch):
     from peano_bayes import bundled
+    from peano_bayes.app.pipeline import _discovery_seconds, _model_choice
     from peano_bayes.data import load
     from peano_bayes.discovery import choice as choice_module
-    from peano_bayes.pipeline import _discovery_seconds, _model_choice
 
     def never(*args, **kwargs):
         raise AssertionError("discovery ran again")
@@ -139,8 +139,8 @@ def test_a_resumed_fit_keeps_the_model_of_its_saved_state(tmp_path):
     """Resuming a fit sampled without discovery does not run discovery (its saved state belongs to the configured
     model), and resuming one sampled with discovery keeps the report's model without the flag."""
     from peano_bayes import bundled
+    from peano_bayes.app.pipeline import _model_choice
     from peano_bayes.data import load
-    from peano_bayes.pipeline import _model_choice
 
     dataset = load(bundled.dataset_path("TP"))
     plain = tmp_path / "plain"
@@ -163,7 +163,8 @@ def test_discovery_starts_from_the_fits_least_squares_which_also_serves_the_samp
     """``fit --discover``: the configured model's least squares runs once, discovery's base fit starts at its
     optimum, and the same least squares seeds the sampler (``fit.json``) unless discovery adds an effect, when the
     larger model gets its own least squares."""
-    from peano_bayes import bundled, pipeline
+    from peano_bayes import bundled
+    from peano_bayes.app import pipeline
     from peano_bayes.discovery import choice as choice_module
 
     class Stop(Exception):

@@ -8,8 +8,10 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from peano_bayes.app.batch import RunLog
 from peano_bayes.errors import PeanoBayesInputError
-from peano_bayes.pipeline import RunLog, _linearisation_point, index_markdown
+from peano_bayes.inference.driver import _linearisation_point
+from peano_bayes.report.index import index_markdown
 
 
 def test_run_log_prints_and_appends_timestamped_lines_and_pickles(tmp_path):
@@ -152,12 +154,12 @@ def test_a_resumed_state_needs_the_point_its_input_error_was_linearised_at(tmp_p
 def test_a_main_job_unit_reports_its_material_in_the_worker(tmp_path, monkeypatch):
     """The main job's unit samples and then computes its own metrics and figures (not the parent, one material
     at a time); a fit-many unit does not."""
-    from peano_bayes import pipeline
+    from peano_bayes.app import batch
 
     calls = []
-    monkeypatch.setattr(pipeline, "infer", lambda source, out, **kw: {"material": "TP", "label": kw["label"]})
-    monkeypatch.setattr(pipeline, "material_report", lambda d, s, **kw: calls.append((d, s["label"], kw["n_draws"])))
-    pipeline._infer_unit("TP.csv", str(tmp_path), "TP", {"log": print}, report_draws=pipeline.REPORT_DRAWS)
-    assert calls == [(tmp_path / "TP", "TP", pipeline.REPORT_DRAWS)]
-    pipeline._infer_unit("TP.csv", str(tmp_path), "TP", {"log": print})
+    monkeypatch.setattr(batch, "infer", lambda source, out, **kw: {"material": "TP", "label": kw["label"]})
+    monkeypatch.setattr(batch, "material_report", lambda d, s, **kw: calls.append((d, s["label"], kw["n_draws"])))
+    batch._infer_unit("TP.csv", str(tmp_path), "TP", {"log": print}, report_draws=batch.REPORT_DRAWS)
+    assert calls == [(tmp_path / "TP", "TP", batch.REPORT_DRAWS)]
+    batch._infer_unit("TP.csv", str(tmp_path), "TP", {"log": print})
     assert len(calls) == 1

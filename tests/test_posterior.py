@@ -110,7 +110,7 @@ def test_bundled_priors_of_varying_parameters_are_flat_on_the_spread_scale():
     a few tau / sqrt(n): every bundled prior of a varying parameter is loguniform or lognormal with
     sigma_log >= 1 (tau near 0.05-0.2)."""
     from peano_bayes.bundled import MATERIALS
-    from peano_bayes.inference.likelihood import SPECIMEN_VARYING
+    from peano_bayes.inference.reduce import SPECIMEN_VARYING
 
     for code in MATERIALS:
         prior = prior_for(code)

@@ -5,8 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from peano_bayes.cli import main
-from peano_bayes.ranking import CRITERIA, ordering_checks, pareto_probability, rank_criterion, rank_materials
+from peano_bayes.analysis.ranking import CRITERIA, ordering_checks, pareto_probability, rank_criterion, rank_materials
+from peano_bayes.app.cli import main
 
 
 def _draws(rng, means, sd=0.1, n=4000):
@@ -113,7 +113,7 @@ def test_rank_command_writes_its_report_and_refuses_missing_metrics(tmp_path, rn
 
 
 def test_ranking_says_when_materials_were_tested_at_different_pressures(rng):
-    from peano_bayes.ranking import ranking_markdown
+    from peano_bayes.analysis.ranking import ranking_markdown
 
     draws = _draws(rng, {"TP": 1.0, "FC": 2.0, "P": 1.5}, n=200)
     mixed = ranking_markdown(rank_materials(draws, test_pressure_kpa={"TP": 30.0, "FC": 200.0, "P": 30.0}))
@@ -133,7 +133,7 @@ def test_ranking_says_when_materials_were_tested_at_different_pressures(rng):
 
 
 def test_ordering_summary_counts_each_verdict_once(rng):
-    from peano_bayes.ranking import ordering_counts, ordering_summary, ranking_markdown
+    from peano_bayes.analysis.ranking import ordering_counts, ordering_summary, ranking_markdown
 
     # With 1 % spread: "a > b" agrees when a's mean is 30 % larger, contradicts when 30 % smaller and is
     # undecided when the means are equal (TP and P); "about equal" agrees for equal means, else contradicts.

@@ -11,10 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from peano_bayes.cli import main
-from peano_bayes.errors import PeanoBayesInputError
-from peano_bayes.physics import DEFAULT_CONFIG, PAPER_GEOMETRY, Geometry, scale_parameters, static_force, static_strain
-from peano_bayes.recommend import (
+from peano_bayes.analysis.recommend import (
     limit_violations,
     load_spec,
     new_specimen_draws,
@@ -23,6 +20,9 @@ from peano_bayes.recommend import (
     thickness_m,
     wall_thickness_m,
 )
+from peano_bayes.app.cli import main
+from peano_bayes.errors import PeanoBayesInputError
+from peano_bayes.physics import DEFAULT_CONFIG, PAPER_GEOMETRY, Geometry, scale_parameters, static_force, static_strain
 
 # One xdist worker runs this group, so the session fixture `recovered` (a fit and a sampling run) is built once.
 pytestmark = pytest.mark.xdist_group("recovered")
@@ -136,8 +136,8 @@ def test_response_time_is_contraction_over_step_speed_and_flagged_when_from_the_
     speed = [0.03] * (n // 2) + [0.01] * (n // 2)
     metrics = {"material": "TP", "draws": {"speed": speed}, "summary": {"speed": {"from_prior": True}}}
     (root / "TP" / "metrics.json").write_text(json.dumps(metrics))
+    from peano_bayes.analysis.recommend import _result_geometry
     from peano_bayes.inference.results import load_result
-    from peano_bayes.recommend import _result_geometry
 
     l0 = float(_result_geometry(load_result(root / "TP")).flat_length_m)
     fast, slow = 0.05 * l0 / 0.03, 0.05 * l0 / 0.01  # response times [s] at contraction 0.05
@@ -226,9 +226,9 @@ def test_new_specimens_carry_the_between_specimen_spread_on_the_wall_stiffnesses
 def _independent_operating_force(idata, geometry, pressure_pa, contraction, n_draws):
     """The median force on the contracting branch, recomputed from the posterior draws without the
     recommendation code: stretch 5 % past the contraction at 0.01 /s, contract back, read the last force."""
+    from peano_bayes.analysis.recommend import _result_geometry
     from peano_bayes.inference.results import parameter_draws, result_config
     from peano_bayes.physics import LoadCycle, simulate_load_cycle
-    from peano_bayes.recommend import _result_geometry
 
     config = result_config(idata)
     sets, _ = parameter_draws(idata, n_draws)

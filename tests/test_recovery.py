@@ -31,7 +31,7 @@ def test_least_squares_continues_in_rounds_until_the_best_start_converges(recove
     """Rounds of 10 steps from two starts reach the optimum that the fixture's fit of 80-step rounds found, and
     say how many rounds that took; with one round of 10 steps the fit says it did not converge."""
     from peano_bayes.inference.fit import fit
-    from peano_bayes.inference.priors import prior_for
+    from peano_bayes.inference.prior_files import prior_for
 
     posterior, _, _, _, fitted = recovered
     names = list(fitted["names"])

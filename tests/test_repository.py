@@ -167,7 +167,7 @@ def test_the_check_finds_a_dangling_reference(tmp_path):
         [
             "see `experiments/no_such_study/RESULT.md` and [the format](../docs/data-format.md)",
             "and [nothing](./no_such_file.md), DESIGN" + ".md section 5",
-            "fine: peano_bayes/rig.py, peano_bayes/bundled/data/<CODE>.csv, tests/*.py, https://x.org/a/b.md",
+            "fine: peano_bayes/rig/, peano_bayes/bundled/data/<CODE>.csv, tests/*.py, https://x.org/a/b.md",
             "[a link](https://example.org/docs/x.md) and [an anchor](#top)",
         ]
     )

@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from peano_bayes.cli import main
+from peano_bayes.app.cli import main
 from peano_bayes.data import load, save
 from peano_bayes.data.dataset import SIGNALS
 from peano_bayes.errors import PeanoBayesInputError

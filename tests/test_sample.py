@@ -299,7 +299,7 @@ def test_convergence_of_a_chain_with_a_walker_that_never_moved_is_a_verdict_not_
 
 
 def test_main_job_continues_only_an_unconverged_material_with_kept_state_and_steps_left(tmp_path):
-    from peano_bayes.pipeline import _can_continue
+    from peano_bayes.app.batch import _can_continue
 
     unconverged = {"convergence": {"converged": False}, "steps": 20000}
     assert not _can_continue(unconverged, tmp_path, 40000)  # no sampler state kept

@@ -12,6 +12,7 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
+from peano_bayes.analysis import readouts as metrics
 from peano_bayes.bundled import dataset_path
 from peano_bayes.data import load
 from peano_bayes.physics import (
@@ -24,7 +25,6 @@ from peano_bayes.physics import (
     ModelConfig,
     Step,
     Stroke,
-    metrics,
     pouch,
     simulate_blocking,
     simulate_load_cycle,

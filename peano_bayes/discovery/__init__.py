@@ -1,5 +1,5 @@
 """Discrepancy workflow: find where the model and the data disagree, name the missing effect, add it, and show
-the gap shrink (effect names: :data:`~peano_bayes.discovery.effects.LIBRARY`).
+the gap shrink (effect names: :data:`~peano_bayes.effects.LIBRARY`).
 
 Data flow: a rig :class:`~peano_bayes.data.Dataset` -> :func:`discovery_data` (one specimen, binned, whole
 runs split into fit and held-out, covariates) -> :func:`discover` (base fit, diagnosis, screening of the
@@ -8,8 +8,8 @@ on data with hidden effects.
 """
 
 from .. import jax_config  # noqa: F401  (float64 before any JAX array is made; see peano_bayes.jax_config)
+from ..effects import CONFUSABLE, LIBRARY, NOISE_EFFECTS, PHYSICS_EFFECTS, Effect
 from .data import SplitData, discovery_data
-from .effects import CONFUSABLE, LIBRARY, NOISE_EFFECTS, PHYSICS_EFFECTS, Effect
 from .model import DEFAULT_BASE, SUPERSET_CONFIG
 from .report import report_markdown, write_report
 from .workflow import Discovery, Gates, discover

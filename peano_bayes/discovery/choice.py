@@ -1,10 +1,11 @@
 """The inference model of a material chosen with discovery: its configured model plus what discovery named.
 
-The effect registry (:data:`~peano_bayes.discovery.effects.LIBRARY`) says which
-:class:`~peano_bayes.physics.ModelConfig` fields contain each physics effect (``Effect.model``), so the same
-names serve both directions: :func:`effects_in` reads the effects a configuration contains, :func:`adopt` adds
-named effects to one. :func:`choose_model` runs discovery from the material's configured model as the base,
-writes its report, and returns a :class:`ModelChoice`: the configuration to sample and the record of why.
+The effect registry (:mod:`peano_bayes.effects`) says which :class:`~peano_bayes.physics.ModelConfig` fields
+contain each physics effect (``Effect.model``), so the same names serve both directions:
+:func:`~peano_bayes.effects.effects_in` reads the effects a configuration contains,
+:func:`~peano_bayes.effects.adopt` adds named effects to one. :func:`choose_model` runs discovery from the
+material's configured model as the base, writes its report, and returns a :class:`ModelChoice`: the
+configuration to sample and the record of why.
 
 Discovery only adds: an effect of the configured model is never removed, because on one specimen's tests a
 missing effect can hide behind another (``ABSORBS``, ``CONFUSABLE``) and discovery misses some generating
@@ -19,43 +20,8 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..effects import LIBRARY, PHYSICS_EFFECTS, adopt, effects_in
 from ..physics.model import ModelConfig
-from .effects import LIBRARY, PHYSICS_EFFECTS
-
-
-def _holds(config: ModelConfig, field: str, value) -> bool:
-    """Whether ``config`` contains what ``field = value`` switches on. A field naming a law counts with any law
-    but ``"none"`` (Dahl friction across the tubes or the whole muscle; an orifice or a laminar inlet, so
-    ``flow_restriction`` is in every model and ``value`` only says which law :func:`adopt` would choose), so a
-    named effect never replaces the law a model has; a number of branches counts when at least ``value``."""
-    current = getattr(config, field)
-    if isinstance(value, str):
-        return current != "none"
-    if isinstance(value, bool):
-        return bool(current) or not value
-    if isinstance(value, int):
-        return current >= value
-    return current == value
-
-
-def effects_in(config: ModelConfig) -> tuple[str, ...]:
-    """The library's physics effects that ``config`` contains, in library order."""
-    return tuple(
-        name
-        for name in PHYSICS_EFFECTS
-        if LIBRARY[name].model and all(_holds(config, f, v) for f, v in LIBRARY[name].model.items())
-    )
-
-
-def adopt(config: ModelConfig, named) -> ModelConfig:
-    """``config`` with the elements of the ``named`` effects switched on (effects without an element in the
-    inference model, and those already contained, change nothing)."""
-    changes = {}
-    for name in named:
-        for field, value in LIBRARY[name].model.items():
-            if not _holds(config, field, value):
-                changes[field] = value
-    return ModelConfig(**{**config_dict(config), **changes})
 
 
 def config_dict(config: ModelConfig) -> dict:
@@ -161,10 +127,8 @@ def choose_model(
 
 __all__ = [
     "ModelChoice",
-    "adopt",
     "choice_from_report",
     "choose_model",
     "config_dict",
     "configured_model",
-    "effects_in",
 ]

@@ -48,7 +48,7 @@ import numpy as np
 from ..data import Dataset
 from ..errors import PeanoBayesInputError
 from ..inference.fit import sensor_noise
-from ..inference.likelihood import OBSERVED, RunGroup, mean_error_factor, prepare
+from ..inference.reduce import OBSERVED, RunGroup, mean_error_factor, prepare
 from .model import DiscoveryData
 
 #: Samples per bin by test for discovery (coarser than inference: screening many refits must be fast).
@@ -58,7 +58,7 @@ DISCOVERY_EVERY_SAMPLE = frozenset({"blocking", "stroke"})
 #: Tests whose fitted inputs' error discovery's fits estimate (see the module docstring): the stroke test's
 #: pressure ramp, whose error moves a strain measured to 2e-4 by up to three bin sd. Discovery compares refits
 #: against each other and screens hundreds of them, so the load cycles and blocking tests, where the error is
-#: within noise per bin (:data:`~peano_bayes.inference.likelihood.INPUT_ERROR_TESTS` integrates it there for
+#: within noise per bin (:data:`~peano_bayes.inference.reduce.INPUT_ERROR_TESTS` integrates it there for
 #: calibrated intervals), keep their fitted inputs as exact; their strain error would also need each run's own
 #: input (see **Inputs**), which the shared estimate does not cover.
 DISCOVERY_INPUT_ERRORS = frozenset({"stroke"})

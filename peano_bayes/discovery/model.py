@@ -20,30 +20,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..inference.likelihood import (
-    OBSERVED,
-    SOLVER_TOLERANCE,
-    SPECIMEN_OFFSET,
-    RunGroup,
-    input_error_jacobian,
-    predict,
-)
-from ..physics import Geometry, ModelConfig
-from .effects import BASELINE_PARAMETERS, EXTRA_PARAMETERS, LIBRARY, check_effects, parameter_spec
+from ..effects import BASELINE_PARAMETERS, EXTRA_PARAMETERS, LIBRARY, check_effects, parameter_spec, superset_config
+from ..inference.likelihood import SOLVER_TOLERANCE, input_error_jacobian, predict
+from ..inference.reduce import OBSERVED, SPECIMEN_OFFSET, RunGroup
+from ..physics import Geometry
 
-#: Every element any library effect needs, switched on; inactive ones are pinned at their off values.
-SUPERSET_CONFIG = ModelConfig(
-    bending=True,
-    tensile=True,
-    extension=True,
-    mount=True,
-    parallel_maxwell=1,
-    series_kelvin=1,
-    friction="parallel",
-    threshold=True,
-    flow="orifice",
-    damping=True,
-)
+#: Every element any registered effect needs, switched on (:func:`~peano_bayes.effects.superset_config`, read
+#: when this module is first imported); inactive ones are pinned at their off values.
+SUPERSET_CONFIG = superset_config()
 #: Parameter order of every vector in this package.
 NAMES: tuple[str, ...] = SUPERSET_CONFIG.parameter_names() + tuple(EXTRA_PARAMETERS)
 #: Free in every model: the effective length fraction of the contractile unit.

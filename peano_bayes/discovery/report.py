@@ -9,12 +9,12 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from .. import plots
 from ..atomic import write_text
-from ..figures import save
+from ..effects import ABSORBS, CONFUSABLE, LIBRARY
 from ..formatting import format_number
 from ..inference.fit import NOISE_CONSISTENCY_SE
-from .effects import ABSORBS, CONFUSABLE, LIBRARY
+from ..report import plots
+from ..report.figures import save
 
 _UNIT = {"load_cycle": "N", "blocking": "N", "stroke": "-", "step": "-"}
 

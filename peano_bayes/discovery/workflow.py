@@ -32,7 +32,7 @@ The evidence also records how much of the structure the diagnosis flagged the ca
 ``flagged_before``, ``flagged_after``: sums of ``T^2`` over the Holm-significant signatures); reported, not gated.
 
 **Verdicts:** the physics effects added (``named``); ``ambiguous`` when a rival of a known confusable pair
-(:data:`~peano_bayes.discovery.effects.CONFUSABLE`) passed every gate with an elpd within two standard errors of
+(:data:`~peano_bayes.effects.CONFUSABLE`) passed every gate with an elpd within two standard errors of
 the winner (the rivals and the experiment that separates them are reported; a passing candidate outside such a
 pair is screened again once the winner is in the model and, if it too came within two standard errors, is
 reported in the step's ``close_calls``, so the engineer sees the tie without the verdict changing);
@@ -67,11 +67,11 @@ from dataclasses import asdict, dataclass, fields, replace
 import numpy as np
 from scipy import stats
 
+from ..effects import CONFUSABLE, FLEXIBLE_TERMS, LIBRARY, WIDENING_NOISE, check_effects
 from ..inference.fit import lag1_effective_size, noise_excess
 from ..physics import PARAMETERS
 from .data import Covariates, SplitData
 from .diagnose import SQUARED, Diagnosis, diagnose, signature_statistic, signature_weights
-from .effects import CONFUSABLE, FLEXIBLE_TERMS, LIBRARY, WIDENING_NOISE, check_effects
 from .fitting import BATCH, Evaluation, ModelFit, evaluate, fit_models, gauss_newton_gain
 from .model import DEFAULT_BASE, NAMES, model_spec
 

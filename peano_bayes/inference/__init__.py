@@ -3,29 +3,11 @@ squares, resumable emcee sampling and arviz results."""
 
 from .. import jax_config  # noqa: F401  (float64 before any JAX array is made; see peano_bayes.jax_config)
 from .fit import DEFAULT_NOISE, FitResult, fit, fit_quality
-from .likelihood import (
-    DEFAULT_BIN_SIZES,
-    NOISE_PARAMETERS,
-    SOLVER_TOLERANCE,
-    Observations,
-    RunGroup,
-    log_likelihood,
-    pointwise_log_likelihood,
-    predict,
-    prepare,
-)
+from .likelihood import SOLVER_TOLERANCE, log_likelihood, pointwise_log_likelihood, predict
 from .posterior import Posterior, build_posterior
-from .priors import (
-    ALL_PARAMETERS,
-    DEFAULT_PRIORS_DIR,
-    LIKELIHOOD_PARAMETERS,
-    Marginal,
-    Prior,
-    load_prior,
-    parse_entry,
-    prior_files,
-    prior_for,
-)
+from .prior_files import DEFAULT_PRIORS_DIR, load_prior, parse_entry, prior_files, prior_for
+from .priors import ALL_PARAMETERS, LIKELIHOOD_PARAMETERS, Marginal, Prior
+from .reduce import DEFAULT_BIN_SIZES, NOISE_PARAMETERS, Observations, RunGroup, prepare
 from .sample import Convergence, SampleResult, convergence, sample
 
 __all__ = [

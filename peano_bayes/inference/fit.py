@@ -22,8 +22,10 @@ import optimistix as optx
 from ..defaults import DEFAULT_STARTS
 from ..physics import ModelConfig
 from .denoise import noise_sd
-from .likelihood import OBSERVED, SOLVER_TOLERANCE, Observations, bin_noise_sd, predict, whitened_residuals
+from .likelihood import SOLVER_TOLERANCE, bin_noise_sd, predict, whitened_residuals
 from .priors import Prior
+from .reduce import OBSERVED, Observations
+from .status import FitStatus
 
 #: Noise scales [per raw sample] used to weight the residuals when none are given.
 DEFAULT_NOISE = {
@@ -107,6 +109,14 @@ class FitResult:
     converged: bool | None = None
     rounds: int = 1
     optima: tuple[dict, ...] = ()
+
+    @property
+    def status(self) -> FitStatus | None:
+        """How the least squares ended (:class:`~peano_bayes.inference.status.FitStatus`); ``None`` where not
+        recorded."""
+        if self.converged is None:
+            return None
+        return FitStatus.SUCCESSFUL if self.converged else FitStatus.STEP_LIMIT
 
 
 def _prior_spread(prior: Prior, seed: int) -> jnp.ndarray:

@@ -30,24 +30,31 @@ import numpy as np
 from scipy import optimize
 
 from .posterior import SPECIMEN_SD, Posterior
+from .status import ModeStatus
 
 
 @dataclass(frozen=True, eq=False)
 class Laplace:
     """``mode`` (D,) theta at the optimum; ``covariance`` (D, D) inverse Hessian of -log posterior there
     (eigenvalues floored and capped, see :func:`posterior_mode`); ``log_prob`` at the mode; ``steps`` of
-    BFGS; ``status`` the optimiser's message ("" when it succeeded); ``seconds`` wall, compile included."""
+    BFGS; ``status`` how it ended (:class:`~peano_bayes.inference.status.ModeStatus`); ``seconds`` wall, compile
+    included; ``detail`` the optimiser's own message where it stopped short ("" otherwise)."""
 
     mode: np.ndarray
     covariance: np.ndarray
     log_prob: float
     steps: int
-    status: str
+    status: ModeStatus
     seconds: float
+    detail: str = ""
 
     @property
     def succeeded(self) -> bool:
-        return self.status == ""
+        return self.status.ok
+
+    def describe(self) -> str:
+        """How the mode ended, in words: the status's message and the optimiser's detail."""
+        return self.status.message + (f" ({self.detail})" if self.detail else "")
 
 
 @dataclass(frozen=True, eq=False)
@@ -163,7 +170,7 @@ def posterior_mode(
     ``fallback_covariance`` instead, and no direction's standard deviation exceeds ``max_sd`` (in the
     coordinates searched: theta, i.e. log units for positive parameters, with specimen contrasts divided by the
     spread, see the module docstring). If BFGS ends somewhere worse than ``start`` or non-finite, ``start`` and
-    ``fallback_covariance`` are returned with the optimiser's message in ``status``.
+    ``fallback_covariance`` are returned with the reason in ``status`` (and ``detail``).
     """
     t0 = time.perf_counter()
     start = np.asarray(start, dtype=float)
@@ -183,23 +190,25 @@ def posterior_mode(
     start_eta = coords.to_eta(start)
     lp_start = -objective(start_eta)[0]
     if not np.isfinite(lp_start):  # nothing to climb from: say so rather than "ended below its start"
-        reason = "the start's log posterior or its gradient is not finite"
-        return Laplace(start, np.asarray(fallback_covariance), lp_start, 0, reason, time.perf_counter() - t0)
+        status = ModeStatus.START_NOT_FINITE
+        return Laplace(start, np.asarray(fallback_covariance), lp_start, 0, status, time.perf_counter() - t0)
     found = optimize.minimize(
         objective, start_eta, jac=True, method="BFGS", options={"maxiter": max_steps, "gtol": 1e-6}
     )
     mode_eta, lp_mode, steps = np.asarray(found.x), -float(found.fun), int(found.nit)
     # BFGS's own "precision loss" stop at a flat optimum is not a failure; the gradient norm says how close.
-    status = "" if found.success or np.linalg.norm(found.jac) < 1e-2 else str(found.message)
+    flat = found.success or np.linalg.norm(found.jac) < 1e-2
+    status, detail = (ModeStatus.SUCCESSFUL, "") if flat else (ModeStatus.STOPPED, str(found.message))
     if not np.isfinite(lp_mode) or lp_mode < lp_start:
-        reason = status or "BFGS ended below its start"
         lp = _theta_log_prob(coords, start_eta, lp_start)
-        return Laplace(start, np.asarray(fallback_covariance), lp, steps, reason, time.perf_counter() - t0)
+        cov = np.asarray(fallback_covariance)
+        return Laplace(start, cov, lp, steps, ModeStatus.BELOW_START, time.perf_counter() - t0, detail)
     jac = coords.jacobian(mode_eta)
     hessian = finite_difference_hessian(lambda x: objective(x)[1], mode_eta)
     covariance = _laplace_covariance(hessian, _in_eta(jac, np.asarray(fallback_covariance)), max_sd)
     lp = _theta_log_prob(coords, mode_eta, lp_mode)
-    return Laplace(coords.to_theta(mode_eta), _in_theta(jac, covariance), lp, steps, status, time.perf_counter() - t0)
+    cov = _in_theta(jac, covariance)
+    return Laplace(coords.to_theta(mode_eta), cov, lp, steps, status, time.perf_counter() - t0, detail)
 
 
 def _laplace_covariance(hessian: np.ndarray, fallback_covariance: np.ndarray, max_sd: float) -> np.ndarray:
@@ -269,11 +278,12 @@ def refine_mode(
         objective, np.zeros(d), jac=True, method="BFGS", options={"maxiter": max_steps, "gtol": gtol}
     )
     lp_mode = -float(found.fun)
-    status = "" if found.success or np.linalg.norm(found.jac) < 10 * gtol else str(found.message)
+    flat = found.success or np.linalg.norm(found.jac) < 10 * gtol
+    status, detail = (ModeStatus.SUCCESSFUL, "") if flat else (ModeStatus.STOPPED, str(found.message))
     if not np.isfinite(lp_mode) or lp_mode < lp_start:
-        reason = status or "BFGS ended below its start"
         lp = _theta_log_prob(coords, eta0, lp_start)
-        return dataclasses.replace(start, log_prob=lp, status=reason, seconds=time.perf_counter() - t0)
+        seconds = time.perf_counter() - t0
+        return dataclasses.replace(start, log_prob=lp, status=ModeStatus.BELOW_START, seconds=seconds, detail=detail)
     u0 = np.asarray(found.x)
     pairs = [(i, j) for i in range(d) for j in range(i + 1, d)]
     h = hessian_step
@@ -289,8 +299,8 @@ def refine_mode(
     mode_eta = to_eta(u0)
     mode, lp = coords.to_theta(mode_eta), _theta_log_prob(coords, mode_eta, lp_mode)
     if not np.all(np.isfinite(values)):  # a Hessian point beyond the support: keep the start's shape
-        status = status or "Hessian not finite; the start's covariance kept"
-        return Laplace(mode, start.covariance, lp, int(found.nit), status, time.perf_counter() - t0)
+        seconds = time.perf_counter() - t0
+        return Laplace(mode, start.covariance, lp, int(found.nit), ModeStatus.HESSIAN_NOT_FINITE, seconds, detail)
     centre, plus, minus = values[0], values[1 : d + 1], values[d + 1 : 2 * d + 1]
     hessian_u = np.diag((plus - 2.0 * centre + minus) / h**2)
     corners = values[2 * d + 1 :].reshape(-1, 4)
@@ -299,7 +309,7 @@ def refine_mode(
     inverse = np.linalg.inv(chol)
     covariance = _laplace_covariance(inverse.T @ hessian_u @ inverse, start_eta, max_sd)
     covariance = _in_theta(coords.jacobian(mode_eta), covariance)
-    return Laplace(mode, covariance, lp, int(found.nit), status, time.perf_counter() - t0)
+    return Laplace(mode, covariance, lp, int(found.nit), status, time.perf_counter() - t0, detail)
 
 
 __all__ = ["Laplace", "NonCentred", "finite_difference_hessian", "posterior_mode", "refine_mode"]

@@ -2,7 +2,7 @@
 
 ``theta = [u (d,), c (v (n_specimens - 1),)]``: ``u`` the prior's parameters in unconstrained space (see
 :class:`~peano_bayes.inference.Prior`), ``c`` the specimens' log contrasts, ``n_specimens - 1`` for each of the
-``v`` sampled parameters that differ between specimens (:data:`~peano_bayes.inference.likelihood.SPECIMEN_VARYING`:
+``v`` sampled parameters that differ between specimens (:data:`~peano_bayes.inference.reduce.SPECIMEN_VARYING`:
 the wall stiffnesses, the friction's pre-sliding stiffness and the mount compliance).
 
 **Specimens as a hierarchy.** Specimen ``s`` of a material has ``ln x_s = mu + tau z_s`` for each varying
@@ -37,16 +37,9 @@ import numpy as np
 
 from ..physics import ModelConfig
 from .fit import residual_correlation, structured_lag1
-from .likelihood import (
-    OBSERVED,
-    SPECIMEN_OFFSET,
-    SPECIMEN_VARYING,
-    Observations,
-    linearise_input_error,
-    pointwise_log_likelihood,
-    with_residual_lag1,
-)
+from .likelihood import linearise_input_error, pointwise_log_likelihood, with_residual_lag1
 from .priors import Prior
+from .reduce import OBSERVED, SPECIMEN_OFFSET, SPECIMEN_VARYING, Observations
 
 #: Parameters only the step response informs: the inlet restriction and the load's damping.
 STEP_ONLY_PARAMETERS = frozenset(
@@ -64,7 +57,7 @@ STEP_ONLY_PARAMETERS = frozenset(
 #: 212 steps over 1500, on TP). The bundled datasets were generated with these three at nominal. The friction
 #: element's pre-sliding stiffness is not held: the rig draws it per specimen like the wall stiffnesses, and
 #: where friction is strong the load cycles and blocking tests resolve it (see
-#: :data:`~peano_bayes.inference.likelihood.SPECIMEN_VARYING`).
+#: :data:`~peano_bayes.inference.reduce.SPECIMEN_VARYING`).
 DEFAULT_HELD = ("length_fraction", "bending_exponent", "extension_rate")
 SPECIMEN_SD = "specimen_log_sd"
 CONTRAST_PREFIX = "specimen_contrast_"
@@ -208,7 +201,7 @@ class Posterior:
         """ln p(theta | data) up to a constant; ``-inf``, never NaN, for any theta. ``groups`` (default this
         posterior's) may be traced: unmeasured bins contribute 0, so no data-dependent masking is needed.
         ``exact_inputs``: treat the fitted driving inputs as exact (leave their error out of the likelihood,
-        see :data:`~peano_bayes.inference.likelihood.INPUT_ERROR_TESTS`)."""
+        see :data:`~peano_bayes.inference.reduce.INPUT_ERROR_TESTS`)."""
         observations = self.observations
         if groups is not None:
             observations = dataclasses.replace(observations, groups=tuple(groups))
@@ -357,7 +350,7 @@ def build_posterior(
 
     Samples every parameter ``config`` (default ``prior.config``) reads that the tests present inform, the
     noise scale of each test present and, with several specimens, ``specimen_log_sd`` and the contrasts of each
-    sampled parameter of :data:`~peano_bayes.inference.likelihood.SPECIMEN_VARYING`; the
+    sampled parameter of :data:`~peano_bayes.inference.reduce.SPECIMEN_VARYING`; the
     rest, and the ``held`` names (default :data:`DEFAULT_HELD`; ``()`` samples them too), are held at ``fixed``
     or nominal values.
     """

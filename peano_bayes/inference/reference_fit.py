@@ -26,7 +26,7 @@ import optimistix as optx
 from scipy import optimize
 
 from ..physics.reference import VEALE_TABLE2, VealeParameters, veale_force
-from .likelihood import Observations
+from .reduce import Observations
 
 #: Table 2's tube (the geometry ``VEALE_TABLE2`` is written for) [m].
 TABLE2_TUBE_WIDTH_M = 0.015

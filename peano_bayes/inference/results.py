@@ -29,7 +29,7 @@ from ..errors import PeanoBayesInputError
 from ..physics import ModelConfig
 from .likelihood import group_log_likelihood
 from .posterior import STEP_ONLY_PARAMETERS, Posterior, fixed_batches
-from .priors import load_prior
+from .prior_files import load_prior
 from .sample import SampleResult
 
 MAX_DRAWS_PER_WALKER = 250
@@ -273,7 +273,7 @@ def parameter_draws(
     idata, n_draws: int, seed: int = 0, *, level: str = "new_specimen"
 ) -> tuple[list[dict], tuple[str, ...]]:
     """``n_draws`` parameter sets [SI] from a result, evenly spaced over the stored posterior, and the names
-    drawn from the prior instead (see :class:`~peano_bayes.metrics.PosteriorMetrics`).
+    drawn from the prior instead (see :class:`~peano_bayes.analysis.metrics.PosteriorMetrics`).
 
     ``level``: ``"new_specimen"`` (default), a specimen not yet made, so the sets carry the between-specimen
     spread (what a designer building one more muscle gets); ``"population"``, the material's population value.

@@ -58,6 +58,7 @@ from ..errors import PeanoBayesError, PeanoBayesInputError
 from .coordinates import Identity
 from .diagnostics import MIN_CHUNK, MIN_ENSEMBLES, TARGETS, Convergence, convergence, missing_steps, planned_chunk
 from .posterior import Posterior
+from .status import SampleStatus
 from .warmup import (
     STABLE,
     WARMUP_BOUNDS,
@@ -318,6 +319,11 @@ class SampleResult:
     warmup_stable: bool = True
     warmup_changes: list = field(default_factory=list)
     checks: list = field(default_factory=list)
+
+    @property
+    def status(self) -> SampleStatus:
+        """How sampling ended (:class:`~peano_bayes.inference.status.SampleStatus`)."""
+        return SampleStatus.CONVERGED if self.convergence.converged else SampleStatus.STEP_LIMIT
 
     def kept(self) -> np.ndarray:
         """(walkers, draws, D) after burn-in."""

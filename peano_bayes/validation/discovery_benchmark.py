@@ -9,8 +9,8 @@ inlet, on material PC's protocol (200 kPa), shortened (:data:`PROTOCOL`), one sp
 ``bending_stiffness`` and ``tensile_stiffness`` are part of every base (see
 :data:`~peano_bayes.discovery.model.DEFAULT_BASE`) and so cannot be hidden.
 
-**Signal-to-noise ratio:** for strength factor ``s`` of an effect's reference parameters
-(:data:`REFERENCE`), ``SNR = max over tests of RMS(y_with - y_without) / sigma_test`` from noise-free
+**Signal-to-noise ratio:** for strength factor ``s`` of an effect's reference parameters (``hidden_at`` of
+:mod:`peano_bayes.effects`), ``SNR = max over tests of RMS(y_with - y_without) / sigma_test`` from noise-free
 simulations at equal base parameters, with ``sigma_test`` the rig's per-sample noise of that test's signal.
 :func:`strength_for_snr` finds ``s`` by bisection in log ``s``.
 """
@@ -26,9 +26,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..data import Dataset
-from ..discovery.effects import CONFUSABLE, LIBRARY, OPEN_ORIFICE_M2, PHYSICS_EFFECTS
 from ..discovery.model import DEFAULT_BASE, NAMES, ModelSpec, model_spec
-from ..inference.likelihood import OBSERVED, SPECIMEN_SCALED
+from ..effects import CONFUSABLE, LIBRARY, OPEN_ORIFICE_M2, PHYSICS_EFFECTS, hideable
+from ..inference.reduce import OBSERVED, SPECIMEN_SCALED
 from ..physics import ModelConfig
 from ..rig import RigNoise, RigProtocol, RigSimulationError, simulate_dataset, simulate_veale_dataset
 
@@ -56,40 +56,10 @@ TWO_MOUNTS = (0.0, SECOND_MOUNT_M_PER_N)
 #: Load-cell drift of the out-of-library case [N/s] (about 0.7 N over one specimen's session).
 DRIFT_N_PER_S = 0.005
 
-#: Effects the benchmark can hide: (quirks switched on, parameters at strength s).
-REFERENCE = {
-    "hysteresis": (
-        ("hysteresis",),
-        lambda s: {
-            "friction_force_n": 0.5 * s,
-            "friction_pressure_fraction": 0.05 * s,
-            "friction_stiffness_n_per_m": 2e4,
-        },
-    ),
-    "viscoelastic_relaxation": (
-        ("viscoelastic_relaxation",),
-        lambda s: {"parallel_maxwell1_k_n_per_m": 500.0 * s, "parallel_maxwell1_tau_s": 2.0},
-    ),
-    "series_viscoelastic": (
-        ("series_viscoelastic",),
-        lambda s: {"series_kelvin1_k_n_per_m": 2e4 / s, "series_kelvin1_tau_s": 2.0},
-    ),
-    "series_compliance": (("series_compliance",), lambda s: {"mount_compliance_m_per_n": 1e-5 * s}),
-    "strain_stiffening": (("strain_stiffening",), lambda s: {"extension_k_n_per_m": 200.0 * s, "extension_rate": 50.0}),
-    "threshold_pressure": (("threshold_pressure",), lambda s: {"threshold_pressure_pa": 5e3 * s}),
-    "flow_restriction": ((), lambda s: {"orifice_area_m2": max(OPEN_ORIFICE_M2 / (1.0 + 10.0 * s), 1e-7)}),
-    "nonlinear_damping": (
-        ("nonlinear_damping",),
-        lambda s: {
-            "damping_up_ns_per_m": 20.0 * s,
-            "damping_down_ns_per_m": 5.0 * s,
-            "damping_quadratic_ns2_per_m2": 50.0 * s,
-        },
-    ),
-    "cyclic_softening": ((), lambda s: {"cyclic_softening_fraction": 0.1 * s}),
-}
-HIDEABLE: tuple[str, ...] = tuple(REFERENCE)
-NOT_HIDEABLE = tuple(e for e in PHYSICS_EFFECTS if e not in REFERENCE)
+#: Effects the benchmark can hide (:func:`~peano_bayes.effects.hideable`: each registry entry's ``hidden_at``
+#: gives its parameters at strength ``s``; the rig switches the element on where it is a quirk).
+HIDEABLE: tuple[str, ...] = tuple(hideable())
+NOT_HIDEABLE = tuple(e for e in PHYSICS_EFFECTS if e not in HIDEABLE)
 
 
 @dataclass(frozen=True)
@@ -167,8 +137,9 @@ def _simulate(
 def _truth(effects: tuple[str, ...], strengths: dict) -> tuple[dict, tuple, float]:
     params, quirks, softening = dict(TRUTH_PARAMS), (), 0.0
     for e in effects:
-        q, make = REFERENCE[e]
-        values = make(strengths[e])
+        effect = LIBRARY[e]
+        values = dict(effect.hidden_at(strengths[e]))
+        q = (e,) if effect.switchable else ()
         softening = values.pop("cyclic_softening_fraction", softening)
         params.update(values)
         quirks += q
@@ -295,7 +266,7 @@ def _rmse(x: np.ndarray) -> float:
 def truth_gap(case: Case, seed: int, result, strengths: dict | None = None, tests=None) -> dict:
     """How much of the hidden effect the discovered model recovers, against the noise-free truth
     (:func:`noise_free_dataset`), on each hidden effect's scored test (fixed in the registry,
-    :attr:`~peano_bayes.discovery.effects.Effect.scored_test`).
+    :attr:`~peano_bayes.effects.Effect.scored_test`).
 
     ``result`` is the :class:`~peano_bayes.discovery.workflow.Discovery` of ``hidden_dataset(case, seed,
     strengths)`` on ``tests``. Per hidden effect: ``test``; ``before`` and ``after``, the held-out RMSE of the
@@ -354,7 +325,7 @@ def run_key(case: Case, seed: int) -> str:
 
 
 def run_case(case: Case, seed: int, strengths: dict, tests: tuple[str, ...] | None = None) -> dict:
-    """One benchmark run as a work unit of :func:`peano_bayes.fanout.run_units`: the hidden-effect dataset of
+    """One benchmark run as a work unit of :func:`peano_bayes.app.fanout.run_units`: the hidden-effect dataset of
     ``case`` at ``seed`` (``strengths`` by effect), discovery on its ``tests`` (default: all it has), and its
     JSON-ready scored row (:func:`score`, :func:`truth_gap`, the report's verdict, named effects, noise model,
     screening and diagnoses, and the seconds it took)."""

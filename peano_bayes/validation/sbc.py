@@ -33,9 +33,9 @@ from scipy import stats
 
 from ..errors import PeanoBayesInputError
 from ..inference.laplace import NonCentred, posterior_mode, refine_mode
-from ..inference.likelihood import INPUT_ERROR_TESTS, prepare
 from ..inference.posterior import SPECIMEN_SD, Posterior, build_posterior, helmert
-from ..inference.priors import prior_for
+from ..inference.prior_files import prior_for
+from ..inference.reduce import INPUT_ERROR_TESTS, prepare
 from ..inference.sample import sample
 from ..physics import DEFAULT_CONFIG
 from ..rig import RigNoise, RigSimulationError, simulate_dataset
@@ -299,7 +299,7 @@ def _process_base(specimens: int = 1) -> Posterior:
 
 
 def replicate_unit(index: int, *, seed: int, **settings) -> dict:
-    """Replicate ``index`` as a work unit of :func:`peano_bayes.fanout.run_units`: :func:`run_replicate` with
+    """Replicate ``index`` as a work unit of :func:`peano_bayes.app.fanout.run_units`: :func:`run_replicate` with
     ``settings`` (its keyword arguments, and ``specimens``, default 1) on the base posterior, built once per
     process (so every replicate a worker runs shares its compiled log posterior). The result is a JSON-ready
     row: ``seed``, ``exact_inputs``, ``specimens``, ``names`` (:func:`rank_names`, the order of ``truth`` and

@@ -1,7 +1,7 @@
 """The paper's Table 3 metrics: measured from a rig dataset, and predicted by a posterior.
 
 **Measured** (:func:`dataset_metrics`, :func:`run_metrics`): every metric uses
-:mod:`peano_bayes.physics.metrics` (the paper's Table 3 definitions) on each run and is averaged over specimens
+:mod:`peano_bayes.analysis.readouts` (the paper's Table 3 definitions) on each run and is averaged over specimens
 and repeats. Interpretation choices, stated once:
 
 - stiffness: tangent of the stretching branch of the 0 kPa load cycles at -1.5 % strain [N/m], from a
@@ -9,7 +9,7 @@ and repeats. Interpretation choices, stated once:
   NaN when the cycle does not cover -1.5 % (the start tension already stretches the muscle past it);
 - hysteresis loss, free strain and energy: the load cycles at the test pressure (Figure 9 uses the
   pressurized cycles of Figure 8(b)(d));
-- step metrics (:func:`smoothed_step_metrics`): :func:`peano_bayes.physics.metrics.step_metrics` (rms speed,
+- step metrics (:func:`smoothed_step_metrics`): :func:`peano_bayes.analysis.readouts.step_metrics` (rms speed,
   rms power ``m (g + a) v``, rms mechanical over rms fluid power) on strain and flow smoothed with a zero-phase
   Savitzky-Golay filter (``STEP_SMOOTHING_S``, as any rig must before taking a speed and an acceleration from
   a 1 kHz position signal), over a window from the supply edge to the first maximum of the smoothed strain
@@ -41,17 +41,17 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.signal import savgol_filter
 
-from . import bundled
-from .errors import PeanoBayesError, PeanoBayesInputError
-from .formatting import format_number
-from .inference.fit import structured_tests
-from .inference.posterior import STEP_ONLY_PARAMETERS
-from .inference.results import load_result, parameter_draws, result_config
-from .materials import MATERIALS, MaterialSpec
-from .materials import material as material_spec
-from .physics import DEFAULT_CONFIG, PAPER_GEOMETRY, Geometry, LoadCycle, ModelConfig, simulate_load_cycle
-from .physics import metrics as m
-from .rig import RigNoise, RigSimulationError, apply_quirks, simulate_dataset
+from .. import bundled
+from ..errors import PeanoBayesError, PeanoBayesInputError
+from ..formatting import format_number
+from ..inference.fit import structured_tests
+from ..inference.posterior import STEP_ONLY_PARAMETERS
+from ..inference.results import load_result, parameter_draws, result_config
+from ..materials import MATERIALS, MaterialSpec
+from ..materials import material as material_spec
+from ..physics import DEFAULT_CONFIG, PAPER_GEOMETRY, Geometry, LoadCycle, ModelConfig, simulate_load_cycle
+from ..rig import RigNoise, RigSimulationError, apply_quirks, simulate_dataset
+from . import readouts as m
 
 #: Version of what ``metrics.json`` holds, raised when the same result would give other metrics (2: the model
 #: discrepancy of misfit tests added, one normal per test, growing above the tested pressure).
@@ -104,8 +104,8 @@ def stiffness(strain, force_n, flat_length_m, at_strain: float = STIFFNESS_STRAI
 
 
 def smoothed_step_metrics(time_s, strain, supply_pa, flow_m3_per_s, load_n, flat_length_m, test_pressure_pa):
-    """Table 3 step metrics of a measured step response: :func:`peano_bayes.physics.metrics.step_metrics` with
-    ``overshoot_fraction`` :data:`~peano_bayes.physics.metrics.OVERSHOOT_FRACTION` on strain and flow smoothed
+    """Table 3 step metrics of a measured step response: :func:`peano_bayes.analysis.readouts.step_metrics` with
+    ``overshoot_fraction`` :data:`~peano_bayes.analysis.readouts.OVERSHOOT_FRACTION` on strain and flow smoothed
     over ``STEP_SMOOTHING_S``."""
     flow = None if flow_m3_per_s is None else _smooth(flow_m3_per_s, time_s)
     return m.step_metrics(
@@ -526,11 +526,11 @@ def evaluate_result(
     noise [signal unit] that :func:`posterior_metrics` adds to the metrics read off it, as measured, before any
     growth above the tested pressure: :func:`misfit_discrepancy` of the ``summary.json`` beside the result;
     empty without one or where the model explains the data), ``version`` (:data:`METRICS_VERSION`) and
-    ``draws`` (metric -> list of predictive values, for :mod:`peano_bayes.ranking`). ``test_pressure_kpa``: a
+    ``draws`` (metric -> list of predictive values, for :mod:`peano_bayes.analysis.ranking`). ``test_pressure_kpa``: a
     common pressure [kPa] instead of the material's own."""
     from tqdm.auto import tqdm
 
-    from .atomic import write_text
+    from ..atomic import write_text
 
     idata = load_result(path)
     total = idata.posterior.sizes["chain"] * idata.posterior.sizes["draw"]

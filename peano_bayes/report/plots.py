@@ -1,5 +1,5 @@
 """Plot functions: each takes prepared data (NumPy arrays, plain dicts) and matplotlib axes, draws, and
-computes nothing; :mod:`peano_bayes.figures` prepares the data from results and saves the figures.
+computes nothing; :mod:`peano_bayes.report.figures` prepares the data from results and saves the figures.
 
 One look for every figure (:data:`STYLE`, used with ``matplotlib.rc_context``); axis labels carry units.
 """

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .model import GRAVITY_M_PER_S2
+from ..physics.model import GRAVITY_M_PER_S2
 
 PA_PER_MPA = 1e6
 

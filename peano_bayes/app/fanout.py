@@ -43,7 +43,7 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .errors import PeanoBayesInputError
+from ..errors import PeanoBayesInputError
 
 #: Seconds between refreshes of the progress bar's running count while no unit finishes.
 POLL_S = 10.0
@@ -125,7 +125,7 @@ def log_name(key: str) -> str:
 def _execute(unit: Unit, context: _Context) -> Outcome:
     """Run ``unit`` in this process (a worker, or the parent when serial) and report where and how long."""
     if context.cache_dir:
-        from .jax_config import enable_compilation_cache
+        from ..jax_config import enable_compilation_cache
 
         enable_compilation_cache(context.cache_dir)
     worker = f"{socket.gethostname()}:{os.getpid()}"
@@ -263,7 +263,7 @@ def raise_failures(outcomes: Sequence[Outcome], what: str = "work unit") -> None
     """Raise one error naming every failed outcome and its error (the tracebacks stay in the outcomes)."""
     failed = [o for o in outcomes if not o.ok]
     if failed:
-        from .errors import PeanoBayesError
+        from ..errors import PeanoBayesError
 
         lines = "; ".join(f"{o.key}: {o.error}" for o in failed)
         raise PeanoBayesError(f"{len(failed)} of {len(outcomes)} {what}(s) failed: {lines}")

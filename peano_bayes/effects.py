@@ -1,24 +1,39 @@
-"""The closed library of candidate effects the discovery workflow may name.
+"""The effect registry: every effect a Peano muscle's data may show, defined once.
 
-Each :class:`Effect` frees a set of parameters of the discovery model (:mod:`.model`); while it is inactive
-those parameters sit at its ``off`` values, at which it changes no prediction (nesting, tested in
-``tests/test_discovery.py``). ``strength`` names the parameters whose posterior must exclude ``off`` before the
-effect is accepted, and ``signature`` the residual pattern its absence leaves (:mod:`.diagnose`).
+An :class:`Effect` says everything the package knows about one effect: its parameters and the ``off`` values at
+which it changes nothing; the :class:`~peano_bayes.physics.ModelConfig` fields that put its element into a model
+(``model``; :meth:`Effect.switch_on`); whether the virtual rig can switch it on as a hidden effect (a *quirk*,
+:attr:`Effect.switchable`) and the parameters at which the validation benchmark hides it at strength ``s``
+(``hidden_at``); the residual pattern its absence leaves (``signature``, :mod:`~peano_bayes.discovery.diagnose`)
+and the tests it shows in (``shows_in``, scored on :attr:`Effect.scored_test`); and, across effects, the pairs
+the rig's tests cannot tell apart (:data:`CONFUSABLE`) and the effects one stands in for (:data:`ABSORBS`).
 
-Physics effects are elements of :class:`~peano_bayes.physics.ModelConfig` (or, for ``cyclic_softening``, a
-per-cycle stiffness factor); noise-side effects change only the sensor or the noise model, so that a sensor
-problem is never reported as physics. The one flexible term, ``session_baseline``, describes slow structure
-against time in the session that no library effect produces (a flexible term may compete, but never names an
-effect); the workflow reports it as unexplained structure.
+Everything else derives from here: the rig's quirks (:func:`peano_bayes.rig.check_quirks`), the discovery
+model's superset (:func:`superset_config`), discovery's candidates (:data:`LIBRARY`), the model a fit samples
+when discovery names an effect (:func:`adopt`, :func:`effects_in`), the benchmark's hideable effects
+(:func:`hideable`) and the discovery report. A new effect is one :class:`Effect` in ``_LIST`` below (or, for a
+test or a plug-in, :func:`register`); an effect whose element the physics lacks needs that element in
+:mod:`peano_bayes.physics` first. The discovery model compiles the superset of the effects registered when it is
+first imported.
+
+Kinds: physics effects are elements of :class:`~peano_bayes.physics.ModelConfig` (or, for
+``cyclic_softening``, a per-cycle stiffness factor); noise-side effects change only the sensor or the noise
+model, so that a sensor problem is never reported as physics. The one flexible term, ``session_baseline``,
+describes slow structure against time in the session that no library effect produces (a flexible term may
+compete, but never names an effect); the workflow reports it as unexplained structure.
 """
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Literal
 
-from ..physics.model import PARAMETERS, Parameter
+from .errors import PeanoBayesInputError, did_you_mean
+from .physics.model import PARAMETERS, ModelConfig, Parameter
 
 #: Coefficients of the flexible session baseline, degree 1 to 3 (length scale about a third of the session).
 BASELINE_PARAMETERS: tuple[str, ...] = ("baseline_p1_n", "baseline_p2_n", "baseline_p3_n")
@@ -53,18 +68,20 @@ def parameter_spec(name: str) -> Parameter:
 
 @dataclass(frozen=True)
 class Effect:
-    """One candidate effect.
+    """One effect.
 
-    **Fields:** ``name``; ``meaning``; ``kind`` ``"physics"``, ``"noise"`` or
-    ``"flexible"`` (describes structure, never named);
-    ``params`` the parameters it frees; ``off`` name -> value at which it changes nothing (the others of
-    ``params`` are held at ``hold`` while inactive); ``start`` name -> weak but non-zero value its screening
-    fit starts from; ``strength`` the parameters tested against ``off``; ``signature`` the residual pattern
-    its absence leaves (a key of :data:`~peano_bayes.discovery.diagnose.SIGNATURES`); ``shows_in`` the rig
-    tests where that pattern appears, the first the one the effect acts on most (:attr:`scored_test`);
-    ``model`` the :class:`~peano_bayes.physics.ModelConfig` fields that put the effect into the inference
-    model (empty where that model has no such element: the noise-side and flexible terms, and
-    ``cyclic_softening``).
+    **Fields:** ``name``; ``meaning``; ``kind`` ``"physics"``, ``"noise"`` or ``"flexible"`` (describes
+    structure, never named); ``params`` the parameters it frees; ``off`` name -> value at which it changes
+    nothing (the others of ``params`` are held at ``hold`` while inactive); ``start`` name -> weak but non-zero
+    value its screening fit starts from; ``strength`` the parameters tested against ``off``; ``signature`` the
+    residual pattern its absence leaves (a key of :data:`~peano_bayes.discovery.diagnose.SIGNATURES`);
+    ``shows_in`` the rig tests where that pattern appears, the first the one the effect acts on most
+    (:attr:`scored_test`); ``model`` the :class:`~peano_bayes.physics.ModelConfig` fields that put the effect
+    into a model (empty where the physics has no such element: the noise-side and flexible terms, and
+    ``cyclic_softening``); ``not_a_switch`` why the virtual rig cannot switch it on as a quirk (an element of
+    every model, set through its parameters, or no element), empty where it can; ``hidden_at`` ``s -> {name:
+    value [SI]}``, the parameters at which the validation benchmark hides it at strength ``s`` (``None``: the
+    benchmark does not hide it).
     """
 
     name: str
@@ -78,6 +95,8 @@ class Effect:
     shows_in: tuple[str, ...]
     hold: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))
     model: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))
+    not_a_switch: str = ""
+    hidden_at: Callable[[float], dict] | None = None
 
     @property
     def scored_test(self) -> str:
@@ -90,8 +109,41 @@ class Effect:
         Kelvin-Voigt unit blocking 2.0 against load cycle 1.9)."""
         return self.shows_in[0]
 
+    @property
+    def switchable(self) -> bool:
+        """Whether the virtual rig can switch the effect's element on (a quirk): a physics effect with an
+        element (``model``) that is not in every model."""
+        return self.kind == "physics" and bool(self.model) and not self.not_a_switch
 
-def _effect(name, meaning, kind, params, off, start, strength, signature, shows_in, hold=None, model=None) -> Effect:
+    def held_by(self, config: ModelConfig) -> bool:
+        """Whether ``config`` contains the effect's element (every field of ``model``, :func:`_holds`)."""
+        return bool(self.model) and all(_holds(config, f, v) for f, v in self.model.items())
+
+    def switch_on(self, config: ModelConfig) -> ModelConfig:
+        """``config`` with the effect's element on; unchanged where it already holds it (a friction or inlet
+        law already chosen is kept, a number of branches only grows)."""
+        changes = {f: v for f, v in self.model.items() if not _holds(config, f, v)}
+        return dataclasses.replace(config, **changes) if changes else config
+
+
+def _holds(config: ModelConfig, field: str, value) -> bool:
+    """Whether ``config`` contains what ``field = value`` switches on. A field naming a law counts with any law
+    but ``"none"`` (Dahl friction across the tubes or the whole muscle; an orifice or a laminar inlet, so
+    ``flow_restriction`` is in every model and ``value`` only says which law :meth:`Effect.switch_on` would
+    choose), so an effect never replaces the law a model has; a number of branches counts when at least
+    ``value``."""
+    current = getattr(config, field)
+    if isinstance(value, str):
+        return current != "none"
+    if isinstance(value, bool):
+        return bool(current) or not value
+    if isinstance(value, int):
+        return current >= value
+    return current == value
+
+
+def _effect(name, meaning, kind, params, off, start, strength, signature, shows_in, hold=None, model=None,
+            not_a_switch="", hidden_at=None) -> Effect:  # fmt: skip
     return Effect(
         name,
         meaning,
@@ -104,6 +156,8 @@ def _effect(name, meaning, kind, params, off, start, strength, signature, shows_
         tuple(shows_in),
         MappingProxyType(dict(hold or {})),
         MappingProxyType(dict(model or {})),
+        not_a_switch,
+        hidden_at,
     )
 
 
@@ -129,6 +183,11 @@ _LIST = (
         ("load_cycle",),
         {"friction_stiffness_n_per_m": 2e4},
         model={"friction": "parallel"},
+        hidden_at=lambda s: {
+            "friction_force_n": 0.5 * s,
+            "friction_pressure_fraction": 0.05 * s,
+            "friction_stiffness_n_per_m": 2e4,
+        },
     ),
     _effect(
         "viscoelastic_relaxation",
@@ -142,6 +201,7 @@ _LIST = (
         ("load_cycle",),
         {"parallel_maxwell1_tau_s": 1.0},
         model={"parallel_maxwell": 1},
+        hidden_at=lambda s: {"parallel_maxwell1_k_n_per_m": 500.0 * s, "parallel_maxwell1_tau_s": 2.0},
     ),
     _effect(
         "series_viscoelastic",
@@ -156,6 +216,7 @@ _LIST = (
         ("blocking", "load_cycle"),
         {"series_kelvin1_tau_s": 1.0},
         model={"series_kelvin": 1},
+        hidden_at=lambda s: {"series_kelvin1_k_n_per_m": 2e4 / s, "series_kelvin1_tau_s": 2.0},
     ),
     _effect(
         "series_compliance",
@@ -168,6 +229,7 @@ _LIST = (
         "force_level",
         ("blocking", "load_cycle"),
         model={"mount": True},
+        hidden_at=lambda s: {"mount_compliance_m_per_n": 1e-5 * s},
     ),
     _effect(
         "bending_stiffness",
@@ -181,6 +243,7 @@ _LIST = (
         ("stroke", "step"),
         {"bending_exponent": 6.0},
         model={"bending": True},
+        not_a_switch="set bending_k1_n / bending_k2_n instead",
     ),
     _effect(
         "tensile_stiffness",
@@ -193,6 +256,7 @@ _LIST = (
         "blocking_pressure",
         ("blocking", "load_cycle"),
         model={"tensile": True},
+        not_a_switch="set tensile_ka_n_per_m / tensile_kb_n_per_m2 instead",
     ),
     _effect(
         "strain_stiffening",
@@ -206,6 +270,7 @@ _LIST = (
         ("load_cycle",),
         {"extension_rate": 50.0},
         model={"extension": True},
+        hidden_at=lambda s: {"extension_k_n_per_m": 200.0 * s, "extension_rate": 50.0},
     ),
     _effect(
         "threshold_pressure",
@@ -218,6 +283,7 @@ _LIST = (
         "low_pressure",
         ("stroke", "blocking"),
         model={"threshold": True},
+        hidden_at=lambda s: {"threshold_pressure_pa": 5e3 * s},
     ),
     _effect(
         "flow_restriction",
@@ -230,6 +296,8 @@ _LIST = (
         "step_onset",
         ("step",),
         model={"flow": "orifice"},
+        not_a_switch='set orifice_area_m2 (or [config] flow = "laminar") instead',
+        hidden_at=lambda s: {"orifice_area_m2": max(OPEN_ORIFICE_M2 / (1.0 + 10.0 * s), 1e-7)},
     ),
     _effect(
         "nonlinear_damping",
@@ -242,6 +310,11 @@ _LIST = (
         "step_motion",
         ("step",),
         model={"damping": True},
+        hidden_at=lambda s: {
+            "damping_up_ns_per_m": 20.0 * s,
+            "damping_down_ns_per_m": 5.0 * s,
+            "damping_quadratic_ns2_per_m2": 50.0 * s,
+        },
     ),
     _effect(
         "cyclic_softening",
@@ -253,6 +326,8 @@ _LIST = (
         ("cyclic_softening_fraction",),
         "first_cycle",
         ("blocking", "load_cycle"),
+        not_a_switch="the physics has no such element yet",
+        hidden_at=lambda s: {"cyclic_softening_fraction": 0.1 * s},
     ),
     _effect(
         "sensor_offset",
@@ -301,8 +376,10 @@ _LIST = (
     ),
 )
 
-#: name -> :class:`Effect`, every candidate the workflow screens.
-LIBRARY: MappingProxyType = MappingProxyType({e.name: e for e in _LIST})
+_REGISTRY: dict[str, Effect] = {e.name: e for e in _LIST}
+#: name -> :class:`Effect`: every registered effect, in registration order (a live, read-only view: what
+#: :func:`register` adds appears here). Discovery screens every effect of it not in the model.
+LIBRARY: Mapping[str, Effect] = MappingProxyType(_REGISTRY)
 #: The physics effects (elements of the muscle model).
 PHYSICS_EFFECTS: tuple[str, ...] = tuple(e.name for e in _LIST if e.kind == "physics")
 #: Noise-side alternatives: never reported as physics.
@@ -350,8 +427,6 @@ assert all({k, *v} <= set(LIBRARY) for k, v in ABSORBS.items())
 
 def check_effects(names) -> tuple[str, ...]:
     """Effect names in order, duplicates removed; an unknown name raises ``PeanoBayesInputError``."""
-    from ..errors import PeanoBayesInputError, did_you_mean
-
     out = tuple(dict.fromkeys(names))
     for name in out:
         if name not in LIBRARY:
@@ -361,8 +436,76 @@ def check_effects(names) -> tuple[str, ...]:
     return out
 
 
+def register(effect: Effect) -> Effect:
+    """Add ``effect`` to the registry (a plug-in's or a test's effect); refuses a name already taken, an unknown
+    parameter or an ``off`` value for a parameter the effect does not free. Returns ``effect``."""
+    if effect.name in _REGISTRY:
+        raise PeanoBayesInputError(f"effect {effect.name!r} is already registered")
+    unknown = [p for p in effect.params if p not in PARAMETERS and p not in EXTRA_PARAMETERS]
+    if unknown:
+        raise PeanoBayesInputError(f"effect {effect.name!r}: unknown parameter(s) {', '.join(unknown)}")
+    stray = [p for p in (*effect.off, *effect.hold, *effect.strength) if p not in effect.params]
+    if stray:
+        raise PeanoBayesInputError(f"effect {effect.name!r}: {', '.join(stray)} not among its params")
+    _REGISTRY[effect.name] = effect
+    return effect
+
+
+@contextmanager
+def registered(effect: Effect) -> Iterator[Effect]:
+    """``effect`` registered for the duration of a ``with`` block (tests), removed afterwards."""
+    register(effect)
+    try:
+        yield effect
+    finally:
+        _REGISTRY.pop(effect.name, None)
+
+
+def effects_in(config: ModelConfig) -> tuple[str, ...]:
+    """The registered physics effects whose element ``config`` contains, in registry order."""
+    return tuple(e.name for e in LIBRARY.values() if e.kind == "physics" and e.held_by(config))
+
+
+def adopt(config: ModelConfig, named) -> ModelConfig:
+    """``config`` with the elements of the ``named`` effects switched on (effects without an element, and those
+    already contained, change nothing)."""
+    for name in named:
+        config = LIBRARY[name].switch_on(config)
+    return config
+
+
+def switchable() -> dict[str, Effect]:
+    """name -> :class:`Effect` of every effect the virtual rig can switch on (:attr:`Effect.switchable`)."""
+    return {n: e for n, e in LIBRARY.items() if e.switchable}
+
+
+def hideable() -> dict[str, Effect]:
+    """name -> :class:`Effect` of every effect the validation benchmark can hide (it has ``hidden_at``)."""
+    return {n: e for n, e in LIBRARY.items() if e.hidden_at is not None}
+
+
+def superset_config(effects: Mapping[str, Effect] | None = None) -> ModelConfig:
+    """The smallest :class:`ModelConfig` that holds the element of every physics effect of ``effects`` (default:
+    the registry), each element on: the discovery model's superset."""
+    config = ModelConfig(
+        bending=False, tensile=False, extension=False, mount=False, parallel_maxwell=0, series_kelvin=0,
+        friction="none", threshold=False, flow="orifice", damping=False,
+    )  # fmt: skip
+    for effect in (LIBRARY if effects is None else effects).values():
+        if effect.kind == "physics":
+            config = effect.switch_on(config)
+    return config
+
+
 __all__ = [
     "ABSORBS",
+    "adopt",
+    "effects_in",
+    "hideable",
+    "register",
+    "registered",
+    "superset_config",
+    "switchable",
     "BASELINE_PARAMETERS",
     "CONFUSABLE",
     "EXTRA_PARAMETERS",

@@ -1,6 +1,6 @@
 """Design ranking with uncertainty: which material is best by each Table 3 criterion, and how sure we are.
 
-Works on posterior predictive metric draws (:mod:`peano_bayes.metrics`: a new specimen's, with the model
+Works on posterior predictive metric draws (:mod:`peano_bayes.analysis.metrics`: a new specimen's, with the model
 discrepancy of a test that misfits where a metric is read off one), one independent posterior per material, so
 draws of different materials are paired by index (any pairing of independent draws is a draw from the joint).
 Per criterion: the probability each material is best, the pairwise matrix P(row better than column), the
@@ -215,7 +215,7 @@ def rank_materials(
     own_test_pressure_kpa: dict | None = None,
     failed_draws: dict | None = None,
 ) -> dict:
-    """Everything :mod:`peano_bayes.ranking` computes, as plain data: ``materials``; ``criteria`` (per
+    """Everything :mod:`peano_bayes.analysis.ranking` computes, as plain data: ``materials``; ``criteria`` (per
     criterion: ``p_best``, ``mean_rank``, ``rank_interval`` by material, ``p_better`` matrix rows by material,
     the margin probabilities, ``n`` draws; criteria no draw defines are left out); ``pareto`` (P(Pareto-optimal)
     by material, over the Pareto criteria that are ranked); ``orderings`` (:func:`ordering_checks`);

@@ -1,4 +1,4 @@
-"""Figures of results: prepare the data (quantiles, intervals) from results, draw with :mod:`peano_bayes.plots`,
+"""Figures of results: prepare the data (quantiles, intervals) from results, draw with :mod:`peano_bayes.report.plots`,
 save PNG and PDF atomically.
 
 Per material (``OUT/<code>/figures/``): ``predictive`` (data over the 94 % posterior predictive band, one run
@@ -26,11 +26,12 @@ import matplotlib.pyplot as plt
 import matplotlib.ticker
 import numpy as np
 
+from ..analysis.metrics import METRIC_UNITS
+from ..atomic import replacing
+from ..inference.likelihood import predict
+from ..inference.reduce import NOISE_PARAMETERS, prepare
+from ..physics import PARAMETERS
 from . import plots
-from .atomic import replacing
-from .inference.likelihood import NOISE_PARAMETERS, predict, prepare
-from .metrics import METRIC_UNITS
-from .physics import PARAMETERS
 
 QUANTILES = (0.03, 0.5, 0.97)
 SIGNAL_LABEL = {"load_cycle": "force [N]", "blocking": "force [N]", "stroke": "strain [-]", "step": "strain [-]"}
@@ -153,7 +154,7 @@ def step_band(idata, dataset, n_draws: int = 40) -> dict | None:
     over ``n_draws`` posterior draws: ``time_s``, ``observed``, ``low``, ``median``, ``high`` (94 % of the
     draws, noise-free), ``title`` and ``prior_only`` (parameters drawn from the prior because the fit had no
     step test). ``None`` when the dataset has no step run."""
-    from .inference.results import parameter_draws, result_config
+    from ..inference.results import parameter_draws, result_config
 
     runs = [r for r in dataset.runs if r.test == "step"]
     if not runs:
@@ -181,7 +182,7 @@ def step_band(idata, dataset, n_draws: int = 40) -> dict | None:
 def material_figures(result_dir: str | Path, dataset=None) -> list[Path]:
     """``predictive`` and ``corner`` figures of one result directory into its ``figures/``; given its
     ``dataset`` with a step run, also ``step`` (:func:`step_band`)."""
-    from .inference.results import load_result
+    from ..inference.results import load_result
 
     result_dir = Path(result_dir)
     idata = load_result(result_dir)
@@ -334,7 +335,7 @@ def forest_data(results: dict) -> dict:
 
 def published_data(metrics: dict) -> dict:
     """metric -> (materials, median, low, high, published) for metrics with a published value in any
-    material; ``metrics``: code -> the ``metrics.json`` of :func:`peano_bayes.metrics.evaluate_result`."""
+    material; ``metrics``: code -> the ``metrics.json`` of :func:`peano_bayes.analysis.metrics.evaluate_result`."""
     out = {}
     for code, m in metrics.items():
         published = {row["metric"]: row["value"] for row in m["published"]}
@@ -359,7 +360,7 @@ def _grid(n: int, width: float = 3.0, height: float = 2.3):
 def cross_material_figures(out_dir: str | Path, results: dict, metrics: dict, ranking: dict | None) -> list[Path]:
     """``forest``, ``published`` and ``ranking`` figures into ``out_dir/figures``; ``results``: code ->
     InferenceData; ``metrics``: code -> metrics.json content; ``ranking``: the output of
-    :func:`~peano_bayes.ranking.rank_materials`."""
+    :func:`~peano_bayes.analysis.ranking.rank_materials`."""
     out_dir = Path(out_dir)
     written = []
     with plt.rc_context(plots.STYLE):
@@ -400,7 +401,7 @@ def cross_material_figures(out_dir: str | Path, results: dict, metrics: dict, ra
 
 
 def recommendation_figure(report: dict, path_stem: Path, top: int = 12) -> list[Path]:
-    """The ``top`` candidates of a :func:`~peano_bayes.recommend.recommend` report: each one's operating-force
+    """The ``top`` candidates of a :func:`~peano_bayes.analysis.recommend.recommend` report: each one's operating-force
     margin over the requirement with its 94 % interval, and its probability of meeting every requirement."""
     shown = report["candidates"][:top]
     labels = [

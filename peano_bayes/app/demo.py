@@ -5,7 +5,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from .physics import DEFAULT_CONFIG, PAPER_GEOMETRY, Blocking, ModelConfig, simulate_blocking, static_strain
+from ..physics import DEFAULT_CONFIG, PAPER_GEOMETRY, Blocking, ModelConfig, simulate_blocking, static_strain
 
 
 def blocking_and_free_strain(

@@ -25,10 +25,10 @@ import sys
 import traceback
 from pathlib import Path
 
-from . import __version__
+from .. import __version__
+from ..defaults import compilation_cache_dir
+from ..errors import PeanoBayesError, PeanoBayesInputError
 from .commands import COMMANDS
-from .defaults import compilation_cache_dir
-from .errors import PeanoBayesError, PeanoBayesInputError
 
 #: Exit status of each outcome (documented in the module docstring and ``--help``).
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_UNCONVERGED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
@@ -64,7 +64,7 @@ def _use_compilation_cache() -> None:
     without importing JAX: JAX reads these variables when it is first imported, if it ever is."""
     directory = str(compilation_cache_dir())
     if "jax" in sys.modules:  # already imported (a caller's process): configure it directly
-        from .jax_config import enable_compilation_cache
+        from ..jax_config import enable_compilation_cache
 
         with contextlib.suppress(OSError):  # an unwritable home: compile every time
             enable_compilation_cache(directory)

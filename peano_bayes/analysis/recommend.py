@@ -46,14 +46,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import bundled
-from .defaults import MAX_MOUNT_COMPLIANCE_M_PER_N, MAX_PRESSURE_KPA
-from .errors import PeanoBayesInputError, did_you_mean
-from .inference.likelihood import SPECIMEN_SCALED
-from .inference.posterior import SPECIMEN_SD
-from .materials import MATERIALS
-from .physics import Geometry, LoadCycle, scale_parameters, simulate_load_cycle
-from .physics.pouch import IDEAL_FREE_STRAIN
+from .. import bundled
+from ..defaults import MAX_MOUNT_COMPLIANCE_M_PER_N, MAX_PRESSURE_KPA
+from ..errors import PeanoBayesInputError, did_you_mean
+from ..inference.posterior import SPECIMEN_SD
+from ..inference.reduce import SPECIMEN_SCALED
+from ..materials import MATERIALS
+from ..physics import Geometry, LoadCycle, scale_parameters, simulate_load_cycle
+from ..physics.pouch import IDEAL_FREE_STRAIN
 
 #: Strain [-] the muscle is stretched past the required contraction before contracting back to it, so that
 #: friction and the viscoelastic elements are in their contracting state when the force is read.
@@ -317,10 +317,10 @@ def new_specimen_draws(idata, param_sets: list[dict], *, seed: int = 0) -> dict:
     :func:`~peano_bayes.inference.results.parameter_draws`. A result of the specimen hierarchy already gives
     new-specimen draws (its ``new_specimen__<name>`` variables): they are stacked unchanged. For a result
     that holds only the spread ``specimen_log_sd`` (a common stiffness factor per specimen), each set's wall
-    stiffnesses (:data:`~peano_bayes.inference.likelihood.SPECIMEN_SCALED`) are multiplied by
+    stiffnesses (:data:`~peano_bayes.inference.reduce.SPECIMEN_SCALED`) are multiplied by
     ``exp(specimen_log_sd z)``, ``z ~ N(0, 1)``, the spread taken at the same posterior draw. A fit of one
     specimen has no spread: the draws are unchanged."""
-    from .inference.results import NEW_SPECIMEN_PREFIX, draw_indices
+    from ..inference.results import NEW_SPECIMEN_PREFIX, draw_indices
 
     stacked = {k: np.asarray([p[k] for p in param_sets], float) for k in param_sets[0]}
     post = idata.posterior
@@ -365,7 +365,7 @@ def evaluate_candidates(
     (requirement -> median fraction of the bound to spare; negative means violated), ``force_margin_interval``
     (94 % interval of the force margin), ``binding``, ``force_median_n``, ``force_interval_n`` (94 %) and
     ``infeasible`` (the limits it breaks, empty if none)."""
-    from .inference.results import parameter_draws, result_config
+    from ..inference.results import parameter_draws, result_config
 
     req = spec.requirement
     out, removed = [], []
@@ -488,7 +488,7 @@ def recommend(
             f"{MAX_MOUNT_COMPLIANCE_M_PER_N:g} (100 mm/N), "
             f"got {mount_compliance_m_per_n!r}"
         )
-    from .inference.results import load_result
+    from ..inference.results import load_result
     from .metrics import read_metrics, result_discrepancy
 
     spec = load_spec(spec_path)

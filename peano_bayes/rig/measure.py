@@ -1,0 +1,225 @@
+"""What both virtual rigs share: a specimen's noise-free signals (:class:`_Truth`) measured with seeded sensor
+noise into runs, the checks of a simulation's arguments, and the dataset's provenance."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import string
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..data import Run
+from ..data.dataset import OPTIONAL_SIGNALS
+from ..errors import PeanoBayesError, PeanoBayesInputError, did_you_mean
+from .protocol import _NOISE_STREAM, RIG_TESTS, RigNoise, check_parameter
+
+# --- physics drivers (jitted once per configuration) ----------------------------------------------------------
+
+
+#: Largest equilibrium error the rig accepts from the physics: position [m] in strain-controlled tests (the strain
+#: noise is 12 um), force [N] in load-controlled ones (the force noise is 0.2 N).
+MAX_POSITION_ERROR_M = 1e-6
+MAX_FORCE_ERROR_N = 1e-2
+
+
+class RigSimulationError(PeanoBayesError, RuntimeError):
+    """The physics gave non-finite signals or did not converge for the given parameters (not an input error:
+    the parameters may be valid and the solver's tolerance out of reach for them)."""
+
+
+def _sample_times(rate_hz: float, duration_s: float) -> np.ndarray:
+    """Sample times [s] (n,) from 0 to ``duration_s`` at ``rate_hz``."""
+    return np.arange(round(duration_s * rate_hz) + 1) / rate_hz
+
+
+def _checked(what: str, output, tolerance: float, unit: str) -> list[np.ndarray]:
+    """The signals of a driver's ``(signals, max_residual)`` as NumPy arrays, after checking them."""
+    signals, residual = output
+    arrays = [np.asarray(a, dtype=np.float64) for a in signals]
+    residual = float(residual)
+    if not all(np.all(np.isfinite(a)) for a in arrays):
+        raise RigSimulationError(f"{what}: the physics gave non-finite signals for these parameters")
+    if not residual <= tolerance:
+        raise RigSimulationError(
+            f"{what}: the physics did not converge for these parameters (equilibrium error {residual:.3g} {unit}, "
+            f"tolerance {tolerance:g} {unit})"
+        )
+    return arrays
+
+
+# --- one specimen ---------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Truth:
+    """Noise-free signals of one test condition, SI units; ``None`` where the test does not measure it.
+    ``condition`` numbers the conditions of one test (load cycles: 0 at 0 kPa, 1 at the test pressure)."""
+
+    test: str
+    condition: int
+    time_s: np.ndarray
+    pressure_pa: np.ndarray
+    strain: np.ndarray
+    force_n: np.ndarray | None = None
+    supply_pa: np.ndarray | None = None
+    flow_m3_per_s: np.ndarray | None = None
+    load_n: float | None = None
+    added_compliance_m_per_n: float | None = None
+
+
+def _measure(truth: _Truth, rng: np.random.Generator, noise: RigNoise, drift_offset_s: float | None):
+    """Signals of one repeat: the truth plus sensor noise (and force drift from ``drift_offset_s`` on).
+
+    Draws normals in a fixed order (strain, pressure, force, supply, flow), whether or not a signal exists.
+    """
+    n = truth.time_s.shape[0]
+    draws = rng.standard_normal((5, n))
+    signals = {
+        "time_s": truth.time_s,
+        "strain": truth.strain + noise.strain_sd * draws[0],
+        "pressure_pa": truth.pressure_pa + noise.pressure_sd_pa * draws[1],
+        "force_n": np.full(n, np.nan),
+    }
+    if truth.force_n is not None:
+        force = truth.force_n + noise.force_sd_n * draws[2]
+        if drift_offset_s is not None:
+            force = force + noise.force_drift_n_per_s * (drift_offset_s + truth.time_s)
+        signals["force_n"] = force
+    if truth.supply_pa is not None:
+        signals["supply_pa"] = truth.supply_pa + noise.pressure_sd_pa * draws[3]
+    if truth.flow_m3_per_s is not None:
+        signals["flow_m3_per_s"] = truth.flow_m3_per_s + noise.flow_sd_m3_per_s * draws[4]
+    if truth.load_n is not None:
+        signals["load_n"] = np.full(n, truth.load_n)
+    if truth.added_compliance_m_per_n is not None:
+        signals["added_compliance_m_per_n"] = np.full(n, truth.added_compliance_m_per_n)
+    return signals
+
+
+def _check_count(name: str, value, low: int, high: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or not low <= value <= high:
+        raise PeanoBayesInputError(f"{name} must be an integer in [{low}, {high}], got {value!r}")
+    return int(value)
+
+
+def _check_tests(tests: Iterable[str]) -> tuple[str, ...]:
+    tests = (tests,) if isinstance(tests, str) else tuple(tests)
+    for test in tests:
+        if test not in RIG_TESTS:
+            raise PeanoBayesInputError(
+                f"unknown test {test!r}{did_you_mean(test, RIG_TESTS)}; expected some of {', '.join(RIG_TESTS)}"
+            )
+    if not tests:
+        raise PeanoBayesInputError(f"no tests to run; expected some of {', '.join(RIG_TESTS)}")
+    return tuple(t for t in RIG_TESTS if t in tests)
+
+
+def _check_run(seed, repeats, specimens, tests, specimen_spread) -> tuple[int, int, int, tuple[str, ...]]:
+    """The checked ``(seed, repeats, specimens, tests)`` of a simulated session, and a valid ``specimen_spread``."""
+    checked = (
+        _check_count("seed", seed, 0, 2**63 - 1),
+        _check_count("repeats", repeats, 1, 100),
+        _check_count("specimens", specimens, 1, len(string.ascii_uppercase)),
+        _check_tests(tests),
+    )
+    if not (isinstance(specimen_spread, int | float) and 0 <= specimen_spread <= 1):
+        raise PeanoBayesInputError(f"specimen_spread must be a number in [0, 1], got {specimen_spread!r}")
+    return checked
+
+
+def _check_specimen_values(specimen_values, specimens: int) -> list[dict[str, float]]:
+    """The checked per-specimen overrides of :func:`simulate_dataset` (empty mappings when none are given)."""
+    if specimen_values is None:
+        return [{}] * specimens
+    values = list(specimen_values)
+    if len(values) != specimens:
+        raise PeanoBayesInputError(
+            f"specimen_values: expected one mapping per specimen ({specimens}), got {len(values)}"
+        )
+    checked = []
+    for index, mapping in enumerate(values):
+        if not isinstance(mapping, Mapping):
+            raise PeanoBayesInputError(
+                f"specimen_values[{index}]: expected a mapping of parameter name to value, got {type(mapping).__name__}"
+            )
+        try:
+            checked.append({name: check_parameter(name, value) for name, value in mapping.items()})
+        except PeanoBayesInputError as err:
+            raise PeanoBayesInputError(f"specimen_values[{index}]: {err}") from None
+    return checked
+
+
+def _session_runs(label: str, index: int, truths, *, seed: int, noise: RigNoise, repeats: int, drift: bool):
+    """Specimen ``label``'s measured runs: ``repeats`` noisy repeats of each noise-free truth, in session order
+    (noise streams keyed by specimen ``index``, test and run number; drift grows over the session)."""
+    runs, session_s = [], 0.0
+    for truth in truths:
+        first_run = truth.condition * repeats
+        for number in range(first_run, first_run + repeats):
+            rng = np.random.default_rng([seed, _NOISE_STREAM, index, RIG_TESTS.index(truth.test), number])
+            runs.append(Run(label, truth.test, number, **_measure(truth, rng, noise, session_s if drift else None)))
+            session_s += float(truth.time_s[-1])
+    return runs
+
+
+def _fields(obj) -> dict:
+    return {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)}
+
+
+def _check_mounts(added_compliances) -> tuple[float, ...]:
+    mounts = tuple(added_compliances)
+    if not 1 <= len(mounts) <= 4 or not all(
+        isinstance(c, int | float) and not isinstance(c, bool) and math.isfinite(c) and 0 <= c <= 1e-3 for c in mounts
+    ):
+        raise PeanoBayesInputError(
+            f"added_compliances must be 1 to 4 numbers in [0, 1e-3] m/N (one per mount), got {added_compliances!r}"
+        )
+    return tuple(float(c) for c in mounts)
+
+
+def _fill_optional(runs: list[Run]) -> tuple[Run, ...]:
+    """Give every run the optional signals any run has (NaN where it does not measure them)."""
+    present = [name for name in OPTIONAL_SIGNALS if any(getattr(r, name) is not None for r in runs)]
+    filled = []
+    for run in runs:
+        missing = {name: np.full(len(run), np.nan) for name in present if getattr(run, name) is None}
+        filled.append(dataclasses.replace(run, **missing) if missing else run)
+    return tuple(filled)
+
+
+def _model_provenance(quirks, config, params, fallback, ignored) -> dict[str, str]:
+    """The provenance entries of data from the package's own physics: quirks, configuration and parameters."""
+    return {
+        "quirks": ", ".join(quirks) if quirks else "none",
+        "config": json.dumps(_fields(config)),
+        "parameters": json.dumps(params),
+        "nominal_fallback": ", ".join(fallback) if fallback else "none",
+        "ignored_parameters": ", ".join(ignored) if ignored else "none",
+    }
+
+
+def _provenance(*, source, seed, model, per_specimen, noise, drift, spread, protocol, repeats) -> dict[str, str]:
+    """The sidecar's ``[provenance]``: every fact needed to regenerate the data, as strings (JSON for tables);
+    ``model``: the generating model's own entries, placed after the seed."""
+    from .. import __version__
+
+    return {
+        "source": source,
+        "synthetic": "true",
+        "generator": f"peano_bayes {__version__}",
+        "seed": str(seed),
+        **model,
+        "specimen_spread": repr(float(spread)),
+        "specimen_parameters": json.dumps(per_specimen),
+        "noise": json.dumps(_fields(noise)),
+        "drift": "true" if drift else "false",
+        "protocol": json.dumps(_fields(protocol)),
+        "runs": f"load_cycle runs 0-{repeats - 1} at 0 kPa, {repeats}-{2 * repeats - 1} at the test pressure",
+    }
+
+
+__all__ = ["MAX_FORCE_ERROR_N", "MAX_POSITION_ERROR_M", "RigSimulationError"]

@@ -1,0 +1,169 @@
+"""A virtual rig on another physics: Veale's static force-balance model (:mod:`peano_bayes.physics.reference`),
+for data no model of peano_bayes generated."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import string
+from collections.abc import Iterable
+from functools import partial
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .. import materials
+from ..data import Dataset
+from ..defaults import MAX_PRESSURE_KPA
+from ..errors import PeanoBayesInputError
+from ..materials import GEOMETRY, MaterialSpec
+from ..physics.reference import VEALE_TABLE2, veale_blocking_force, veale_force, veale_free_strain
+from .measure import _check_run, _checked, _fill_optional, _provenance, _sample_times, _session_runs, _Truth
+from .protocol import _SPECIMEN_STREAM, DEFAULT_NOISE, DEFAULT_PROTOCOL, RigNoise, RigProtocol
+
+# --- the same protocol on another physics: Veale's force-balance model ------------------------------------------
+
+#: The tests Veale's static model can run (it has no dynamics, so no step response).
+VEALE_TESTS: tuple[str, ...] = ("load_cycle", "blocking", "stroke")
+#: Fields of :class:`~peano_bayes.physics.reference.VealeParameters` that vary between specimens (stiffnesses).
+VEALE_VARYING = ("tensile_ka_n_per_m", "tensile_kb_n_per_m2", "bending_quartic_n_per_m5", "bending_linear_n_per_m2")
+#: Halvings of the strain bracket in :func:`_veale_strain_at_force` (0.5 in strain to below 1e-15).
+_VEALE_BISECTIONS = 60
+
+
+@jax.jit
+def _veale_strain_at_force(pressure_pa, force_n, params):
+    """Strain [-] at which Veale's muscle carries ``force_n`` [N] at each ``pressure_pa`` [Pa] (any shape).
+
+    The force falls monotonically with strain between a strongly stretched muscle (-0.3) and the free strain
+    (force 0), so bisection over that bracket finds the one root of a positive ``force_n``."""
+    pressure_pa = jnp.asarray(pressure_pa, dtype=jnp.float64)
+
+    def halve(_, bracket):
+        low, high = bracket
+        mid = 0.5 * (low + high)
+        above = veale_force(pressure_pa, mid, params) > force_n
+        return jnp.where(above, mid, low), jnp.where(above, high, mid)
+
+    start = (jnp.full(pressure_pa.shape, -0.3), veale_free_strain(pressure_pa, params))
+    low, high = jax.lax.fori_loop(0, _VEALE_BISECTIONS, halve, start)
+    return 0.5 * (low + high)
+
+
+_veale_force = jax.jit(veale_force)
+_veale_blocking_force = jax.jit(veale_blocking_force)
+
+
+def _veale_truths(params, spec: MaterialSpec, protocol: RigProtocol, tests, cycle_pressures=None) -> list[_Truth]:
+    """The noise-free signals of every test condition of one specimen of Veale's model, in session order; load
+    cycles at ``cycle_pressures`` [Pa] (default: 0 and the test pressure)."""
+    p_test = spec.test_pressure_pa
+    slow = partial(_sample_times, protocol.quasi_static_rate_hz)
+    truths = []
+    if "load_cycle" in tests:
+        t = slow(protocol.cycle_duration_s)
+        for condition, p in enumerate((0.0, p_test) if cycle_pressures is None else cycle_pressures):
+            start = float(_veale_strain_at_force(p, spec.start_tension_n, params))
+            low = min(protocol.stretch_strain, start - protocol.min_stretch)
+            strain = np.interp(t, [0.0, 0.5 * t[-1], t[-1]], [start, low, start])
+            force = np.asarray(_veale_force(p, strain, params), dtype=float)
+            truths.append(_Truth("load_cycle", condition, t, np.full_like(t, p), strain, force))
+    if "blocking" in tests:
+        t = slow(protocol.ramp_duration_s)
+        ramp = p_test * t / t[-1]
+        force = np.asarray(_veale_blocking_force(ramp, params), dtype=float)
+        truths.append(_Truth("blocking", 0, t, ramp, np.zeros_like(t), force))
+    if "stroke" in tests:
+        t = slow(protocol.ramp_duration_s)
+        ramp = p_test * t / t[-1]
+        strain = np.asarray(_veale_strain_at_force(ramp, protocol.stroke_load_n, params), dtype=float)
+        truths.append(_Truth("stroke", 0, t, ramp, strain, load_n=protocol.stroke_load_n))
+    for truth in truths:  # a static model has no solver residual: only the signals are checked
+        signals = [x for x in (truth.strain, truth.force_n) if x is not None]
+        _checked(f"Veale's model, {truth.test} test", (signals, 0.0), 0.0, "")
+    return truths
+
+
+def simulate_veale_dataset(
+    material: str | MaterialSpec,
+    params=None,
+    *,
+    seed: int = 0,
+    noise: RigNoise = DEFAULT_NOISE,
+    specimen_spread: float = 0.05,
+    repeats: int = 3,
+    specimens: int = 2,
+    tests: Iterable[str] = VEALE_TESTS,
+    protocol: RigProtocol = DEFAULT_PROTOCOL,
+    cycle_pressures_pa: Iterable[float] | None = None,
+) -> Dataset:
+    """The rig's quasi-static protocol run on Veale's force-balance model instead of peano_bayes' own physics:
+    data from another model of the same muscle, for checks that must not share the fitted model's assumptions
+    (an inference on it cannot succeed by construction).
+
+    Same protocol, conditions, sensor noise, seeding and file layout as :func:`simulate_dataset`, with the
+    signals of :func:`~peano_bayes.physics.reference.veale_force`: load cycles from the strain at the start
+    tension down to ``stretch_strain`` and back (static: no hysteresis), the blocking force along the pressure
+    ramp, and the stroke test's strain where the muscle carries the hanging load. ``params``: a
+    :class:`~peano_bayes.physics.reference.VealeParameters` (default: the paper's Table 2); each specimen
+    multiplies the stiffnesses of :data:`VEALE_VARYING` by its own log-normal factor of sigma
+    ``specimen_spread``. ``tests``: some of :data:`VEALE_TESTS`. ``cycle_pressures_pa``: the load cycles'
+    pressures [Pa], one condition each (default: 0 and the material's test pressure; each in [0, 1 MPa]). The
+    provenance names the generating model and
+    every specimen's parameters. Raises :class:`~peano_bayes.errors.PeanoBayesInputError` for bad input
+    (a step test among them: the static model has no dynamics), before anything is simulated.
+    """
+    params = VEALE_TABLE2 if params is None else params
+    spec = materials.material(material)
+    seed, repeats, specimens, tests = _check_run(seed, repeats, specimens, tests, specimen_spread)
+    if "step" in tests:
+        raise PeanoBayesInputError(
+            "Veale's force-balance model is static and cannot run a step test; expected some of "
+            + ", ".join(VEALE_TESTS)
+        )
+    if cycle_pressures_pa is not None:
+        cycle_pressures_pa = tuple(float(p) for p in cycle_pressures_pa)
+        limit_pa = MAX_PRESSURE_KPA * 1e3
+        if not cycle_pressures_pa or not all(math.isfinite(p) and 0 <= p <= limit_pa for p in cycle_pressures_pa):
+            raise PeanoBayesInputError(
+                f"cycle_pressures_pa must be one or more pressures in [0, {limit_pa:g}] Pa, got {cycle_pressures_pa!r}"
+            )
+    base = {f.name: float(getattr(params, f.name)) for f in dataclasses.fields(params)}
+    runs, per_specimen = [], {}
+    for index in range(specimens):
+        label = string.ascii_uppercase[index]
+        rng = np.random.default_rng([seed, _SPECIMEN_STREAM, index])
+        own = {k: v * float(np.exp(specimen_spread * rng.standard_normal())) if k in VEALE_VARYING else v
+               for k, v in base.items()}  # fmt: skip
+        per_specimen[label] = own
+        truths = _veale_truths(type(params)(**own), spec, protocol, tests, cycle_pressures_pa)
+        runs += _session_runs(label, index, truths, seed=seed, noise=noise, repeats=repeats, drift=False)
+    provenance = _provenance(
+        source="synthetic: Veale's force-balance model (peano_bayes.rig.simulate_veale_dataset), not a "
+        "measurement and not peano_bayes' own physics",
+        seed=seed,
+        model={"model": "veale_force_balance", "parameters": json.dumps(base)},
+        per_specimen=per_specimen,
+        noise=noise,
+        drift=False,
+        spread=specimen_spread,
+        protocol=protocol,
+        repeats=repeats,
+    )
+    if cycle_pressures_pa is not None:
+        provenance["runs"] = "; ".join(
+            f"load_cycle runs {c * repeats}-{(c + 1) * repeats - 1} at {p / 1e3:g} kPa"
+            for c, p in enumerate(cycle_pressures_pa)
+        )
+    return Dataset(
+        material=spec.data_material(),
+        geometry=GEOMETRY,
+        conditions=spec.conditions(),
+        runs=_fill_optional(runs),
+        provenance=provenance,
+    )
+
+
+__all__ = ["VEALE_TESTS", "VEALE_VARYING", "simulate_veale_dataset"]
