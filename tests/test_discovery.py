@@ -360,15 +360,17 @@ def test_discover_cli_bad_input_exits_2(tmp_path, capsys):
 def test_benchmark_runs_name_nothing_on_a_null_and_no_physics_for_drift():
     """Two scored benchmark runs (:func:`run_case`, as the benchmark sends them) on the load cycles, with the
     discover CLI test's data shapes so they reuse its compiled superset: with nothing hidden (seed 110) the verdict
-    is ``none``; with only load-cell drift hidden (seed 110) no physics effect is named (``none`` or
-    ``unexplained``). These are fixed-seed regression checks of the scoring path; the rates (recall, false
-    positives, with Wilson bounds over 40 seeds per case) are measured by experiments/discrepancy_benchmark.py.
-    The hysteresis case is judged strictly by the discover CLI test."""
+    is ``none``; with only load-cell drift hidden (seed 110) no physics effect is named, and the run is scored
+    right only if it found the drift and showed it in time (``unexplained`` with ``drift_shown``): a missed drift
+    is a miss. These are fixed-seed regression checks of the scoring path; the rates (recall, false positives,
+    with Wilson bounds over 40 seeds per case) are measured by experiments/discrepancy_benchmark.py. The
+    hysteresis case is judged strictly by the discover CLI test."""
     null = run_case(Case(), 110, {}, tests=LOAD_CYCLES)
     assert null["verdict"] == "none" and null["correct"] and not null["false_positive"], null["outcome"]
     drift = run_case(Case(drift=True), 110, {}, tests=LOAD_CYCLES)
     assert drift["verdict"] in ("none", "unexplained") and not drift["named"], drift["outcome"]
-    assert drift["correct"] and not drift["false_positive"]
+    assert drift["correct"] == (drift["verdict"] == "unexplained" and drift["drift_shown"])
+    assert not drift["false_positive"]
 
 
 def test_harness_pressure_noise_follows_the_case():
@@ -987,3 +989,49 @@ def test_a_base_fit_that_only_creeps_stops_and_is_marked_stationary(monkeypatch)
     monkeypatch.setattr(workflow, "fit_models", creeping)
     best = workflow.fit_base(DEFAULT_BASE, None, starts=2, seed=0)
     assert len(calls) == 2 and best.stationary and not best.converged and best.cost == pytest.approx(99.9)
+
+
+def test_a_drift_is_found_only_when_shown_in_time_and_a_missed_one_is_a_miss():
+    gap = {"load_cycle": {"held_out": {"standardized_rmse": 2.0, "rmse": 1.0}}}
+
+    def report(verdict, **extra):
+        return {"verdict": verdict, "named": [], "ambiguous": [], "gap": {"before": gap, "after": gap}, **extra}
+
+    drift = Case(drift=True)
+    assert not score(drift, report("none"))["correct"]  # missed
+    assert not score(drift, report("unexplained"))["correct"]  # a report without drift_shown has not shown it
+    assert not score(drift, report("unexplained", drift_shown=False))["correct"]
+    assert score(drift, report("unexplained", drift_shown=True))["correct"]
+    assert not score(Case(("hysteresis",), 2.0), report("unconverged"))["correct"]
+
+
+def test_an_effect_is_named_only_on_its_own_signatures_evidence():
+    from peano_bayes.discovery.workflow import Gates, own_evidence
+
+    gates = Gates()
+    assert own_evidence({"signature_p_holm": 1e-4, "signature_ratio": 0.3}, gates)
+    assert not own_evidence({"signature_p_holm": 0.2, "signature_ratio": 0.3}, gates)  # not significant before
+    assert not own_evidence({"signature_p_holm": 1e-4, "signature_ratio": 0.8}, gates)  # not halved
+    # the case found on another physics: a signature 1.3 before (never significant) rising to 1.8
+    assert not own_evidence({"signature_p_holm": 0.6, "signature_ratio": 1.8 / 1.3}, gates)
+    assert not own_evidence({}, gates)  # no record: no evidence
+
+
+def test_the_report_names_no_cause_without_the_trend_test_and_says_when_the_base_did_not_converge():
+    from peano_bayes.discovery.report import report_markdown
+
+    base = {
+        "specimen": "A", "named": [], "ambiguous": [], "noise_model": [], "base": ["tensile_stiffness"],
+        "final_model": ["tensile_stiffness"], "steps": [], "gap": {"before": {}, "after": {}}, "screened": [],
+        "gates": {},
+    }  # fmt: skip
+    plain = report_markdown({**base, "verdict": "unexplained", "described": []})
+    assert "unexplained" in plain and "drift" not in plain
+    baseline = report_markdown({**base, "verdict": "unexplained", "described": ["session_baseline"]})
+    assert "no cause is named" in baseline and "load-cell drift" not in baseline  # drift_shown missing: not shown
+    shown = report_markdown({**base, "verdict": "unexplained", "described": ["session_baseline"], "drift_shown": True})
+    assert "load-cell drift" in shown
+    described = report_markdown({**base, "verdict": "unexplained", "described": ["series_viscoelastic"]})
+    assert "`series_viscoelastic` improved the prediction" in described and "not named as physics" in described
+    unconverged = report_markdown({**base, "verdict": "unconverged", "described": []})
+    assert "not screened" in unconverged and "neither met its tolerance" in unconverged

@@ -10,7 +10,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from ..atomic import write_text
-from ..effects import ABSORBS, CONFUSABLE, LIBRARY
+from ..effects import ABSORBS, CONFUSABLE, FLEXIBLE_TERMS, LIBRARY
 from ..formatting import format_number
 from ..inference.fit import NOISE_CONSISTENCY_SE
 from ..report import plots
@@ -121,6 +121,15 @@ def _signature_lines(rounds: list) -> list[str]:
     return lines
 
 
+def _evidence_phrase(step: dict) -> str:
+    """Whether a step's effect was named on its own signature's evidence, in words."""
+    if step["kind"] != "physics":
+        return "not physics, never named"
+    if step.get("named", True):
+        return "significant before and halved or more after, so it is named"
+    return "not significant before, or not halved after, so it is not named"
+
+
 def report_markdown(report: dict) -> str:
     """The report in words a materials engineer reads."""
     lines = [f"# Discovery report: specimen {report['specimen']}", ""]
@@ -134,40 +143,62 @@ def report_markdown(report: dict) -> str:
             )
             for rival, experiment in a["experiment"].items():
                 lines.append(f"- To separate them from {rival}: {experiment}.")
-    elif verdict == "unexplained" and report["described"] and report.get("drift_shown", True):
+    elif verdict == "unconverged":
         lines.append(
-            "**Verdict: unexplained.** The force drifts slowly over the session in a way no effect in the "
-            "library produces; a smooth baseline over session time describes it (step "
-            f"{', '.join(f'`{d}`' for d in report['described'])} below), but it names no physics. The repeats "
-            "of a test condition show the trend in time, so a load-cell drift or a slow change of the specimen "
-            "are likely: re-zero the load cell between tests, or repeat the first test at the end of the session."
-        )
-    elif verdict == "unexplained" and report["described"]:
-        lines.append(
-            "**Verdict: unexplained.** The residuals follow the order of the tests in the session, which a smooth "
-            f"baseline over session time describes (step {', '.join(f'`{d}`' for d in report['described'])} "
-            "below), but the repeats of each test condition show no trend in time: the misfit is ordered with "
-            "the conditions (here, pressure) as much as with time, and no cause is named. Repeating a condition "
-            "at the end of the session would tell a drift from a pressure-dependent misfit."
+            "**Verdict: not screened.** The base model's least squares neither met its tolerance nor stopped "
+            "improving, so no effect is screened or named: a candidate judged against an unfinished fit may stand "
+            "for the base fit's own misfit. Start the base nearer the data (a prior's medians, or the fit's own "
+            "least squares, as `fit --discover` does)."
         )
     elif verdict == "unexplained":
-        lines.append(
-            "**Verdict: unexplained.** The residuals keep structure that no effect in the library explains "
-            "(every candidate failed a gate). Look at the residual figure for its shape; a sensor drift or an "
-            "effect outside the library are likely."
-        )
+        baseline = [d for d in report["described"] if d in FLEXIBLE_TERMS]
+        physics = [d for d in report["described"] if d not in FLEXIBLE_TERMS]
+        if baseline and report.get("drift_shown", False):
+            lines.append(
+                "**Verdict: unexplained.** The force drifts slowly over the session in a way no effect in the "
+                "library produces; a smooth baseline over session time describes it (step "
+                f"{', '.join(f'`{d}`' for d in baseline)} below), but it names no physics. The repeats "
+                "of a test condition show the trend in time, so a load-cell drift or a slow change of the specimen "
+                "are likely: re-zero the load cell between tests, or repeat the first test at the end of the session."
+            )
+        elif baseline:
+            lines.append(
+                "**Verdict: unexplained.** The residuals follow the order of the tests in the session, which a "
+                f"smooth baseline over session time describes (step {', '.join(f'`{d}`' for d in baseline)} "
+                "below), but the repeats of each test condition show no trend in time: the misfit is ordered with "
+                "the conditions (here, pressure) as much as with time, and no cause is named. Repeating a condition "
+                "at the end of the session would tell a drift from a pressure-dependent misfit."
+            )
+        else:
+            lines.append(
+                "**Verdict: unexplained.** The residuals keep structure that no effect in the library explains on "
+                "its own evidence. Look at the residual figure for its shape; no cause is named."
+            )
+        if physics:
+            lines.append(
+                f"\n{', '.join(f'`{d}`' for d in physics)} improved the prediction of the held-out runs, but its "
+                "own residual signature was not significant before it was added or did not fall by half with it "
+                "(see its step below): it describes the misfit here and is not named as physics."
+            )
     else:
         lines.append("**Verdict: none.** No effect beyond the base model is supported by the data.")
-    if report["described"] and verdict != "unexplained":
+    described_baseline = [d for d in report["described"] if d in FLEXIBLE_TERMS]
+    described_physics = [d for d in report["described"] if d not in FLEXIBLE_TERMS]
+    if described_baseline and verdict != "unexplained":
         trend = (
             "The force also drifts slowly over the session"
-            if report.get("drift_shown", True)
+            if report.get("drift_shown", False)
             else "The residuals also follow the order of the tests in the session, with no trend within a "
             "condition's repeats, so no drift is claimed"
         )
         lines.append(
-            f"\n{trend} (described by a smooth baseline, {', '.join(report['described'])}; no library effect "
+            f"\n{trend} (described by a smooth baseline, {', '.join(described_baseline)}; no library effect "
             "explains it)."
+        )
+    if described_physics and verdict != "unexplained":
+        lines.append(
+            f"\n{', '.join(f'`{d}`' for d in described_physics)} also improved the prediction but without its own "
+            "signature's evidence: it describes the misfit and is not named."
         )
     if report["noise_model"]:
         lines.append(f"\nThe sensor or noise model needed: {', '.join(report['noise_model'])} (not physics).")
@@ -189,8 +220,9 @@ def report_markdown(report: dict) -> str:
             f"- Held-out runs: log-likelihood up by {ev['delta_elpd']:.1f} (standard error {ev['elpd_se']:.1f}); "
             f"held-out RMSE x{ev['heldout_rmse_ratio']:.2f}.",
             f"- BIC change {ev['delta_bic']:.1f} (effective sample size {ev['n_eff']:.0f}).",
-            f"- Its residual signature `{ev['signature']}` fell from {ev['signature_before']:.1f} to "
-            f"{ev['signature_after']:.1f} (noise-level units).",
+            f"- Its residual signature `{ev['signature']}`: {ev['signature_before']:.1f} before (Holm p "
+            f"{format_number(ev.get('signature_p_holm', float('nan')))}), {ev['signature_after']:.1f} after "
+            f"(noise-level units): {_evidence_phrase(step)}.",
             "- Strength: "
             + ", ".join(
                 f"`{p}` = {format_number(v['value'])} ± {format_number(v['sd'])}" for p, v in step["parameters"].items()

@@ -31,15 +31,24 @@ it and the gates each failed (``signatures``, one entry per round).
 The evidence also records how much of the structure the diagnosis flagged the candidate removes (``flagged``,
 ``flagged_before``, ``flagged_after``: sums of ``T^2`` over the Holm-significant signatures); reported, not gated.
 
-**Verdicts:** the physics effects added (``named``); ``ambiguous`` when a rival of a known confusable pair
-(:data:`~peano_bayes.effects.CONFUSABLE`) passed every gate with an elpd within two standard errors of
-the winner (the rivals and the experiment that separates them are reported; a passing candidate outside such a
-pair is screened again once the winner is in the model and, if it too came within two standard errors, is
-reported in the step's ``close_calls``, so the engineer sees the tie without the verdict changing);
-``unexplained`` when structure is left and no candidate passes, or when the flexible session baseline was
-needed and no physics effect passed; ``none`` otherwise. A drift is claimed (``drift_shown``) only when the
-residuals the session baseline absorbed trend in time within test conditions (:func:`within_condition_trend`,
-the baseline step's ``time_check``); otherwise the report says the misfit is ordered with the conditions.
+**Named only on its own evidence** (:func:`own_evidence`): an accepted physics effect is named only when its
+own residual signature was significant after Holm before it was added and fell by at least half with it; one
+that passed the gates without that is kept in the model and reported under ``described`` (a description of the
+misfit, as the session baseline is), never named. On data from another physics with nothing hidden, a series
+Kelvin-Voigt unit passed every gate on predictive gain alone while its signature rose (1.3 to 1.8, never
+significant).
+
+**Verdicts:** ``unconverged`` when the base model's least squares neither met its tolerance nor stopped improving
+(:func:`fit_base`): nothing is screened or named, since a candidate would be judged against an unfinished fit;
+otherwise the physics effects named (``named``); ``ambiguous`` when a rival of a known confusable pair
+(:data:`~peano_bayes.effects.CONFUSABLE`) passed every gate with an elpd within two standard errors of the winner
+(the rivals and the experiment that separates them are reported; a passing candidate outside such a pair is
+screened again once the winner is in the model and, if it too came within two standard errors, is reported in the
+step's ``close_calls``, so the engineer sees the tie without the verdict changing); ``unexplained`` when structure
+is left and no candidate passes, or when the flexible session baseline or a physics effect without its own evidence
+was needed and nothing was named; ``none`` otherwise. A drift is claimed (``drift_shown``) only when the residuals
+the session baseline absorbed trend in time within test conditions (:func:`within_condition_trend`, the baseline
+step's ``time_check``); otherwise the report says the misfit is ordered with the conditions.
 Noise-side effects that pass are added and reported as the noise model, never as physics.
 
 **Which passing candidate is accepted:** the one with the largest held-out gain among the physics effects, the
@@ -75,7 +84,7 @@ from .diagnose import SQUARED, Diagnosis, diagnose, signature_statistic, signatu
 from .fitting import BATCH, Evaluation, ModelFit, evaluate, fit_models, gauss_newton_gain
 from .model import DEFAULT_BASE, NAMES, model_spec
 
-VERDICTS = ("named", "none", "ambiguous", "unexplained")
+VERDICTS = ("named", "none", "ambiguous", "unexplained", "unconverged")
 #: Candidates ranked by their signature rather than by Gauss-Newton gain (a noise model lowers the residuals
 #: by widening the noise, which the gain does not penalize): refitted when their signature is significant.
 SCREENED_BY_SIGNATURE = frozenset({"heteroscedastic_noise"})
@@ -287,6 +296,16 @@ def strength_wald(fit: ModelFit, strength: tuple, off: dict, z: float) -> tuple[
     return wald, float(stats.chi2.ppf(level, len(names)))
 
 
+def own_evidence(evidence: dict, gates: Gates = Gates()) -> bool:
+    """Whether an accepted effect may be **named**: its own residual signature was significant after Holm before
+    it was added (``signature_p_holm < gates.alpha``) and fell by at least ``1 - gates.max_signature_ratio``
+    (half) with it. An effect that passes the gates without that improved the prediction for some other reason
+    (it bent to fit a misfit it does not cause) and is reported as a description of the misfit, never named."""
+    p = evidence.get("signature_p_holm", 1.0)
+    ratio = evidence.get("signature_ratio", float("inf"))
+    return bool(p < gates.alpha and ratio <= gates.max_signature_ratio)
+
+
 def _score(
     name, fit, split, before: ModelFit, before_fit: Evaluation, before_held: Evaluation, gates, diag
 ) -> _Candidate:
@@ -325,6 +344,7 @@ def _score(
         "signature_before": float(t_before),
         "signature_after": float(t_after),
         "signature_ratio": float(t_after / t_before) if t_before > 0 else float("inf"),
+        "signature_p_holm": float(diag.p_holm[effect.signature]),
         "strength_z": {k: float(v) for k, v in z_strength.items()},
         "strength_wald": wald,
         "strength_wald_threshold": wald_threshold,
@@ -346,6 +366,7 @@ def _score(
     }
     checks = {k: bool(v) for k, v in checks.items()}
     evidence["gates"] = checks
+    evidence["own_evidence"] = own_evidence(evidence, gates)
     return _Candidate(name, fit, fit_eval, held_eval, evidence, all(checks.values()))
 
 
@@ -516,7 +537,11 @@ def discover(
     diag = diagnose(cur_fit.r, split.fit_covariates, cur_fit.predicted, alpha=gates.alpha, seed=seed)
     diagnoses.append(_diagnosis_dict(diag))
     stopped = "max_effects"
-    while sum(s["kind"] != "flexible" for s in steps) < gates.max_effects:
+    settled = base_fit.converged or base_fit.stationary
+    if not settled:  # a candidate judged against an unfinished base may stand for the base's own misfit
+        stopped = "base_unconverged"
+        say("the base model's least squares did not converge: nothing is screened or named")
+    while settled and sum(s["kind"] != "flexible" for s in steps) < gates.max_effects:
         # Screen whether or not the diagnosis flags structure: the gates, not the diagnosis, decide.
         inactive = [e for e in LIBRARY if e not in current.spec.active]
         present = dict(zip(NAMES, current.x, strict=True))
@@ -555,9 +580,11 @@ def discover(
             if within_two_se(best.held_eval.loglik, c.held_eval.loglik, split.held_out_covariates.block)
         ]
         rivals = [r for r in ties if frozenset({best.name, r}) in CONFUSABLE]
+        kind = LIBRARY[best.name].kind
         step = {
             "effect": best.name,
-            "kind": LIBRARY[best.name].kind,
+            "kind": kind,
+            "named": kind == "physics" and best.evidence["own_evidence"],
             "meaning": LIBRARY[best.name].meaning,
             "rivals": rivals,
             "close_calls": [r for r in ties if r not in rivals],
@@ -586,12 +613,19 @@ def discover(
         current, cur_fit, cur_held = best.fit, best.fit_eval, best.held_eval
         diag = diagnose(cur_fit.r, split.fit_covariates, cur_fit.predicted, alpha=gates.alpha, seed=seed)
         diagnoses.append(_diagnosis_dict(diag))
-    named = [s["effect"] for s in steps if s["kind"] == "physics"]
-    described = [s["effect"] for s in steps if s["kind"] == "flexible"]
+    named = [s["effect"] for s in steps if s["named"]]
+    # a flexible term, or a physics effect that passed the gates without its own signature's evidence
+    described = [s["effect"] for s in steps if s["kind"] == "flexible" or (s["kind"] == "physics" and not s["named"])]
     # drift is claimed only where the repeats of a condition show the trend in time (not only its order)
     drift = any(s["time_check"]["shows_in_time"] for s in steps if s["kind"] == "flexible")
-    ambiguous = [{"effects": [s["effect"], *s["rivals"]], "experiment": s["experiment"]} for s in steps if s["rivals"]]
-    if ambiguous:
+    ambiguous = [
+        {"effects": [s["effect"], *s["rivals"]], "experiment": s["experiment"]}
+        for s in steps
+        if s["rivals"] and s["named"]
+    ]
+    if not settled:
+        verdict = "unconverged"
+    elif ambiguous:
         verdict = "ambiguous"
     elif named:
         verdict = "named"

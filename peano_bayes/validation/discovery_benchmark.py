@@ -228,13 +228,17 @@ def outcome_label(report: dict) -> str:
 
 def score(case: Case, report: dict) -> dict:
     """Whether ``report`` is right about ``case``: ``correct`` and ``false_positive`` (a physics effect named
-    when none or only drift is hidden). How much of the effect the model recovers is :func:`truth_gap`'s."""
+    when none or only drift is hidden). A drift is found only by an ``unexplained`` verdict that shows it in time
+    (``drift_shown``; a report without the field has not shown it); a verdict ``unconverged`` is never correct.
+    How much of the effect the model recovers is :func:`truth_gap`'s."""
     named = set(report["named"])
     for a in report["ambiguous"]:
         named |= set(a["effects"])
     truth = set(case.effects)
-    if case.drift or case.physics != "peano":  # out of the library: nothing to name, a misfit may remain
-        correct = report["verdict"] in ("none", "unexplained")
+    if case.drift:  # out of the library: nothing to name, and the drift must be found and shown in time
+        correct = report["verdict"] == "unexplained" and not named and bool(report.get("drift_shown", False))
+    elif case.physics != "peano":  # another physics, nothing hidden: nothing to name, a misfit may remain
+        correct = report["verdict"] in ("none", "unexplained") and not named
     elif not truth:
         correct = report["verdict"] == "none"
     elif report["verdict"] == "ambiguous":
@@ -345,6 +349,8 @@ def run_case(case: Case, seed: int, strengths: dict, tests: tuple[str, ...] | No
         seed=seed,
         verdict=result.report["verdict"],
         named=result.report["named"],
+        described=result.report["described"],
+        drift_shown=result.report["drift_shown"],
         noise_model=result.report["noise_model"],
         screened=result.report["screened"],
         diagnoses=result.report["diagnoses"],
