@@ -22,6 +22,9 @@ squares missed stays apart and R-hat sees it). Each run has two phases:
   ESS, at least 20 ``tau_max`` kept with ``tau_max`` stable between two checks), or until ``max_steps``; a run
   stopped by the limit is returned with ``converged=False``.
 
+The Markov kernel that advances one ensemble is behind a seam (:mod:`~peano_bayes.inference.kernels`: init, steps,
+record, and one documented state tuple); emcee's ensemble sampler is the default behind it.
+
 Why the independence move: the affine-invariant DE moves handle linear correlation but diffuse slowly in a
 10-20 dimensional posterior; a global proposal shaped like the posterior decorrelates a walker in one accepted
 step wherever the posterior is close to elliptical, and the DE moves keep exploring where it is not.
@@ -46,10 +49,10 @@ import signal
 import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import emcee
 import numpy as np
 
 from ..atomic import write_bytes
@@ -57,6 +60,7 @@ from ..defaults import DEFAULT_CHUNK, DEFAULT_ENSEMBLES, DEFAULT_MAX_STEPS, DEFA
 from ..errors import PeanoBayesError, PeanoBayesInputError
 from .coordinates import Identity
 from .diagnostics import MIN_CHUNK, MIN_ENSEMBLES, TARGETS, Convergence, convergence, missing_steps, planned_chunk
+from .kernels import ADAPTED_MOVES, MOVES, EmceeEnsemble, EnsembleKernel, KernelState, moves_for
 from .posterior import Posterior
 from .status import SampleStatus
 from .warmup import (
@@ -80,26 +84,8 @@ STATE_VERSION = 2
 #: common start's 2 sd, so the warm-up's way in is about as long.
 CENTRE_SPREAD = 2.0
 WALKER_SPREAD = 1.0
-#: Moves before any proposal is fitted (emcee's recommended differential-evolution mix).
-MOVES = ((emcee.moves.DEMove, 0.8), (emcee.moves.DESnookerMove, 0.2))
-#: Weights once the independence proposal is fitted: DE, snooker, independence. The independence move
-#: decorrelates a walker in one accepted step where the posterior is near elliptical; the DE moves carry back
-#: walkers from the tails, where the ellipse under-covers and an independence-only kernel gets stuck.
-ADAPTED_MOVES = (0.4, 0.1, 0.5)
 #: First sampling chunk [steps] before any autocorrelation time is known (capped by ``chunk``).
 FIRST_CHUNK = 100
-def moves_for(proposal: IndependenceProposal | None) -> list:
-    """emcee's weighted moves: :data:`MOVES` without a proposal, else :data:`ADAPTED_MOVES` with it."""
-    if proposal is None:
-        return [(m(), w) for m, w in MOVES]
-    de, snooker, independence = ADAPTED_MOVES
-    return [
-        (emcee.moves.DEMove(), de),
-        (emcee.moves.DESnookerMove(), snooker),
-        (emcee.moves.MHMove(proposal), independence),
-    ]
-
-
 def _centre_draw(centre: np.ndarray, covariance: np.ndarray, scale: float, rng: np.random.Generator) -> np.ndarray:
     return rng.multivariate_normal(centre, scale**2 * covariance, method="eigh")
 
@@ -349,6 +335,7 @@ def sample(
     progress: bool = True,
     log=print,
     coordinates=None,
+    kernel: Callable[..., EnsembleKernel] = EmceeEnsemble,
 ) -> SampleResult:
     """Run ``n_ensembles`` independent emcee ensembles of ``n_walkers`` walkers on ``posterior`` (see the module
     docstring), each started around its own centre (:func:`ensemble_centres` from ``centre`` (D,), ``covariance``
@@ -359,7 +346,9 @@ def sample(
     ``log(message)`` reports each warm-up bound and check. ``coordinates`` (default theta itself,
     :class:`~peano_bayes.inference.coordinates.Identity`): what the ensembles move (see
     :mod:`~peano_bayes.inference.coordinates`); the state file holds those, while the result's chain, log
-    posterior and convergence figures are in theta. Raises :class:`SamplingInterrupted` on Ctrl-C, after
+    posterior and convergence figures are in theta. ``kernel(density, ndim, n_walkers)`` makes the Markov kernel
+    of one ensemble (:class:`~peano_bayes.inference.kernels.EnsembleKernel`; default emcee's,
+    :class:`~peano_bayes.inference.kernels.EmceeEnsemble`). Raises :class:`SamplingInterrupted` on Ctrl-C, after
     saving the state."""
     start_time = time.perf_counter()
     if chunk < 1:
@@ -408,7 +397,7 @@ def sample(
             )
         checks = [list(c) for c in saved.get("checks", [])]
         states = [
-            emcee.State(chain[-1, e * per : (e + 1) * per], log_prob=lps[-1, e * per : (e + 1) * per], random_state=r)
+            KernelState(chain[-1, e * per : (e + 1) * per], lps[-1, e * per : (e + 1) * per], r)
             for e, r in enumerate(rng_states)
         ]
         log(f"resumed from {state_path} at step {chain.shape[0]}")
@@ -420,7 +409,7 @@ def sample(
             walkers = coordinates.to_sampler(walkers)
             lp0 = lp0 + coordinates.to_theta(walkers)[1]
             random_state = np.random.RandomState(_ensemble_seed(seed, e)).get_state()
-            states.append(emcee.State(walkers, log_prob=lp0, random_state=random_state))
+            states.append(KernelState(walkers, lp0, random_state))
     resumed_from = chain.shape[0]
     bounds = warmup_bounds(warmup, max_warmup)
     accepted, chunks, result, step_s = 0.0, [], None, None
@@ -453,14 +442,11 @@ def sample(
                     n = min(n, min_steps - done)
             n = min(n, max_steps - done)
             proposal = adaptation.proposal_at(done)
-            samplers = [
-                emcee.EnsembleSampler(per, ndim, density, vectorize=True, moves=moves_for(proposal))
-                for _ in range(n_ensembles)
-            ]
+            kernels = [kernel(density, ndim, per) for _ in range(n_ensembles)]
             label = "warm-up" if in_warmup else "sampling"
             bar = _bar(progress, n, f"{label} {done}-{done + n}")
             t0 = time.perf_counter()
-            steppers = [s.sample(states[e], iterations=n) for e, s in enumerate(samplers)]
+            steppers = [k.steps(states[e], n, proposal) for e, k in enumerate(kernels)]
             taken = 0
             try:
                 while taken < n and not interrupted.is_set():
@@ -481,9 +467,10 @@ def sample(
                 if bar is not None:
                     bar.close()
             if taken:  # (a stop before the chunk's first step adds nothing)
-                chain = np.concatenate([chain, np.concatenate([s.get_chain() for s in samplers], axis=1)])
-                lps = np.concatenate([lps, np.concatenate([s.get_log_prob() for s in samplers], axis=1)])
-                accepted = float(np.mean(np.concatenate([s.acceptance_fraction for s in samplers])))
+                records = [k.record() for k in kernels]
+                chain = np.concatenate([chain, np.concatenate([r[0] for r in records], axis=1)])
+                lps = np.concatenate([lps, np.concatenate([r[1] for r in records], axis=1)])
+                accepted = float(np.mean(np.concatenate([r[2] for r in records])))
             step_s = (time.perf_counter() - t0) / max(taken, 1)
             steps = chain.shape[0]
             # each state carries its ensemble's RNG state as of its last step (the start's, before any step)
