@@ -97,3 +97,4 @@ def result_dir(recovered, tmp_path_factory):
     out = tmp_path_factory.mktemp("result")
     idata.to_netcdf(str(out / "posterior.nc"))
     return out
+

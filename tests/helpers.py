@@ -26,3 +26,23 @@ def recovery_truth() -> dict:
     from peano_bayes.physics import DEFAULT_CONFIG
 
     return dict(DEFAULT_CONFIG.nominal_parameters(), tensile_ka_n_per_m=8e3, bending_k1_n=1.0)
+
+
+def minimal_summary(**fields) -> dict:
+    """A ``summary.json`` with the fields a fit always writes (:class:`~peano_bayes.inference.summary.Summary`'s
+    required ones, for material TP) and ``fields`` over them: what a test writes beside a result."""
+    return {
+        "material": "TP",
+        "label": "TP",
+        "dataset": "virtual",
+        "prior": "TP",
+        "tests": ["load_cycle", "blocking", "stroke"],
+        "model": {},
+        "seed": 0,
+        "n_walkers": 32,
+        "steps": 100,
+        "convergence": {"converged": True},
+        "parameters": {},
+        "units": {},
+        **fields,
+    }

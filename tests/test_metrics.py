@@ -18,6 +18,8 @@ from peano_bayes.app.cli import main
 from peano_bayes.errors import PeanoBayesInputError
 from peano_bayes.inference.results import load_result, parameter_draws
 
+from .helpers import minimal_summary
+
 # One xdist worker runs this group, so the session fixture `recovered` (a fit and a sampling run) is built once.
 pytestmark = pytest.mark.xdist_group("recovered")
 
@@ -188,7 +190,7 @@ def _summary(structured: dict, consistent: dict = None, adopted: dict = None) ->
                 "consistent_with_noise": kind != "structured",
                 "likelihood_lag1": 0.9 if kind == "adopted" else None,
             }
-    return {"fit_quality_posterior_mean": quality, "residual_correlation": correlation}
+    return minimal_summary(fit_quality_posterior_mean=quality, residual_correlation=correlation)
 
 
 def test_misfit_discrepancy_is_the_excess_of_the_tests_that_misfit_with_structure():

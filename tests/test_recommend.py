@@ -24,6 +24,8 @@ from peano_bayes.app.cli import main
 from peano_bayes.errors import PeanoBayesInputError
 from peano_bayes.physics import DEFAULT_CONFIG, PAPER_GEOMETRY, Geometry, scale_parameters, static_force, static_strain
 
+from .helpers import minimal_summary
+
 # One xdist worker runs this group, so the session fixture `recovered` (a fit and a sampling run) is built once.
 pytestmark = pytest.mark.xdist_group("recovered")
 
@@ -173,10 +175,10 @@ def test_a_material_whose_model_misfits_says_so_in_the_recommendation(results, t
     spec = _spec(tmp_path, GOOD, "n_tubes = [4]\n")
     structured = {"consistent_with_noise": False, "likelihood_lag1": None}
     for excess, expected in ((2.0, True), (0.0, False)):
-        summary = {
-            "fit_quality_posterior_mean": {"blocking": {"excess_rmse": excess}},
-            "residual_correlation": {"blocking": structured},
-        }
+        summary = minimal_summary(
+            fit_quality_posterior_mean={"blocking": {"excess_rmse": excess}},
+            residual_correlation={"blocking": structured},
+        )
         (root / "TP" / "summary.json").write_text(json.dumps(summary))
         notes = recommend(spec, root, log=lambda m: None)["notes"]
         assert any("the model misfits TP's blocking test" in n for n in notes) == expected

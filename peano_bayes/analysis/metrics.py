@@ -47,6 +47,7 @@ from ..formatting import format_number
 from ..inference.fit import structured_tests
 from ..inference.posterior import STEP_ONLY_PARAMETERS
 from ..inference.results import load_result, parameter_draws, result_config
+from ..inference.summary import read_summary
 from ..materials import MATERIALS, MaterialSpec
 from ..materials import material as material_spec
 from ..physics import DEFAULT_CONFIG, PAPER_GEOMETRY, Geometry, LoadCycle, ModelConfig, simulate_load_cycle
@@ -579,7 +580,7 @@ def result_discrepancy(directory: str | Path) -> dict[str, float]:
     if not file.exists():
         return {}
     try:
-        return misfit_discrepancy(_read_json(file))
+        return misfit_discrepancy(read_summary(file))
     except (KeyError, TypeError, AttributeError) as err:
         raise PeanoBayesInputError(
             f"{file}: its fit quality or residual correlation is malformed ({err!r}); "

@@ -19,6 +19,7 @@ from ..defaults import (
 )
 from ..errors import PeanoBayesError, PeanoBayesInputError
 from ..inference.reduce import prepare
+from ..inference.summary import read_summary
 from ..report.index import MATERIAL_FIGURES, index_markdown
 from .pipeline import BUNDLED_MATERIALS, _check_label, _plan_posterior, infer, prior_of, select_tests
 
@@ -89,7 +90,7 @@ def report_results(out_dir: str | Path, materials=BUNDLED_MATERIALS, *, n_draws:
     summaries, metrics, results, references = [], {}, {}, {}
     for code in finished:
         directory = out_dir / code
-        summaries.append(json.loads((directory / "summary.json").read_text()))
+        summaries.append(read_summary(directory))
         references[code], material_metrics = material_report(directory, summaries[-1], n_draws=n_draws, log=log)
         if material_metrics is not None:
             metrics[code] = material_metrics
@@ -170,7 +171,7 @@ def _infer_all(
     for label, source in items:
         done = out_dir / label / "summary.json"
         if done.exists():
-            summary = json.loads(done.read_text())
+            summary = read_summary(done)
             if not _can_continue(summary, out_dir / label, max_steps):
                 without = kwargs.get("discover") and (summary.get("model") or {}).get("discovery") is None
                 note = " (it was sampled without discovery: delete it to redo it with discovery)" if without else ""

@@ -58,6 +58,7 @@ from ..inference.results import (
     write_netcdf,
 )
 from ..inference.sample import sample, walker_count
+from ..inference.summary import Summary, write_summary
 from ..physics.model import ModelConfig
 from ..report.index import DISCOVERY_FOLDER
 
@@ -385,7 +386,7 @@ def infer(
                 + ("" if conv.converged else "; the run has not converged, so its mean may not be a fit yet")
                 + "; 'peano-bayes metrics' adds its misfit beyond the sensor noise to the metrics read off it"
             )
-    summary = {
+    summary = Summary(**{
         "material": code,
         "label": out.name,
         "dataset": str(dataset.source_path),
@@ -448,9 +449,9 @@ def infer(
             },
         },
         "timings_s": timings,
-    }
+    })  # fmt: skip
     write_netcdf(idata, out / "posterior.nc")
-    write_text(out / "summary.json", json.dumps(summary, indent=1, default=float))
+    write_summary(out / "summary.json", summary)
     if result.convergence.converged:
         state_path.unlink(missing_ok=True)
     else:  # kept: a resumed run with a larger step limit continues the same chain
