@@ -32,7 +32,7 @@ import numpy as np
 from scipy import stats
 
 from ..errors import PeanoBayesInputError
-from ..inference.laplace import NonCentred, posterior_mode, refine_mode
+from ..inference.driver import posterior_at_mode
 from ..inference.posterior import SPECIMEN_SD, Posterior, build_posterior, helmert
 from ..inference.prior_files import prior_for
 from ..inference.reduce import INPUT_ERROR_TESTS, prepare
@@ -254,15 +254,13 @@ def run_replicate(
         posterior = replace(base, observations=prepare(data))
     start, spread = mode_start(base)
     posterior = posterior.with_batch_rows(n_walkers // 2)  # the sampler's batch size: one compilation
-    exact = posterior_mode(posterior, start, np.diag(spread**2))
-    posterior = posterior.with_input_error_at(exact.mode)  # as peano-bayes fit does, AR(1) residuals included
-    ar1 = posterior.residual_lag1_at(exact.mode)
-    posterior = posterior.with_residual_lag1(ar1)
-    laplace = refine_mode(posterior.batched, exact, coordinates=NonCentred.of(posterior))
+    # the driver's own stages from a start to the sampler, as peano-bayes fit runs them (AR(1) residuals included)
+    mode = posterior_at_mode(posterior, start, np.diag(spread**2))
+    posterior, ar1 = mode.posterior, mode.lag1
     result = sample(
         posterior,
-        laplace.mode,
-        laplace.covariance,
+        mode.laplace.mode,
+        mode.laplace.covariance,
         n_walkers=n_walkers,
         seed=index,
         warmup=warmup,
