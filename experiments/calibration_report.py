@@ -160,7 +160,7 @@ def _reference_cycle(code: str, truth: dict, config: ModelConfig) -> tuple[float
     cycle = _pressurized_cycles(dataset)[0]
     l0 = dataset.geometry.flat_length_m
     return (
-        table3.free_strain(cycle.strain, cycle.force_n),
+        table3.extrapolated_free_strain(cycle.strain, cycle.force_n),
         table3.energy_per_pressure(cycle.strain, cycle.force_n, cycle.pressure_pa, l0),
     )
 

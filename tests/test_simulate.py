@@ -502,3 +502,41 @@ def test_pressure_loaded_friction_converges_in_the_time_step():
     for rate in (10, 20):
         t, f = force(rate)
         assert np.max(np.abs(f - np.interp(t, t_ref, f_ref))) < 0.003, rate
+
+
+def test_free_strain_is_the_contracting_branch_at_zero_force():
+    """Without friction the quasi-static sweep reaches the relaxed equilibrium that the static solver finds on
+    another path (within the sweep's interpolation); with friction developed against the contraction the
+    muscle stops short of it; the TP generating model's value is the one its load cycle shows where it crosses
+    zero force (0.278, the calibration's figure), and a four times finer sweep moves it by less than 1e-5."""
+    from peano_bayes.physics import simulate as sim
+
+    p = 30e3
+    frictionless = ModelConfig(friction="none")
+    params = nominal(frictionless)
+    swept = float(sim.free_strain(params, p, config=frictionless))
+    assert swept == pytest.approx(float(static_strain(params, p, 0.0, config=frictionless)), abs=2e-6)
+    tp = ModelConfig(friction="parallel")
+    truth = {**nominal(tp), **{k: jnp.asarray(v) for k, v in TP_TRUTH.items()}}
+    with_friction = float(sim.free_strain(truth, p, config=tp))
+    assert with_friction < float(static_strain(truth, p, 0.0, config=tp)) - 0.01
+    assert with_friction == pytest.approx(0.2782, abs=2e-4)
+    finer = sim.FREE_STRAIN_SAMPLES
+    try:
+        sim.FREE_STRAIN_SAMPLES = 4 * finer - 3
+        assert float(sim.free_strain(truth, p, config=tp)) == pytest.approx(with_friction, abs=1e-5)
+    finally:
+        sim.FREE_STRAIN_SAMPLES = finer
+
+
+#: TP's generating parameters (peano_bayes/bundled/data/true_parameters.toml) [SI].
+TP_TRUTH = {
+    "tensile_ka_n_per_m": 547.631,
+    "tensile_kb_n_per_m2": 648723.0,
+    "bending_k1_n": 0.00546463,
+    "bending_k2_n": 0.022947,
+    "extension_k_n_per_m": 8.45316,
+    "friction_force_n": 0.801439,
+    "friction_pressure_fraction": 0.105917,
+    "orifice_area_m2": 5.7035e-06,
+}

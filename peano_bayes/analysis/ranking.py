@@ -38,6 +38,9 @@ PRACTICAL_MARGIN = 0.05
 #: one minus it; undecided between).
 AGREEMENT = 0.9
 STIFFNESS = "stiffness_at_minus_1.5pct_0kPa"
+#: The paper's free strains were read by extrapolating its load cycles to zero force: its orderings are checked
+#: against the same reading of the predicted cycles, while the ranking's criterion is the muscle's own free strain.
+PAPER_FREE_STRAIN = "free_strain_paper_reading"
 
 #: The paper's orderings (``published_orderings.csv``, by row) as checks (metric, a, relation, b), relation
 #: ``">"`` (a larger) or ``"="`` (about equal, :data:`EQUAL_BAND`).
@@ -53,8 +56,8 @@ PUBLISHED_ORDERINGS = [
     [(STIFFNESS, "FC", ">", b) for b in ("TPC", "PC", "PCS", "TFC")]
     + [(STIFFNESS, "TPC", ">", "PC"), (STIFFNESS, "PC", ">", "PCS")]
     + [(STIFFNESS, "TPC", ">", "TFC"), (STIFFNESS, "PC", ">", "TFC")],
-    [("free_strain", "TP", ">", "TFC"), ("free_strain", "P", ">", "TFC"), ("free_strain", "TFC", ">", "PR")],
-    [("free_strain", a, ">", b) for a in ("TPC", "FC") for b in ("PC", "PCS")],
+    [(PAPER_FREE_STRAIN, a, ">", b) for a, b in (("TP", "TFC"), ("P", "TFC"), ("TFC", "PR"))],
+    [(PAPER_FREE_STRAIN, a, ">", b) for a in ("TPC", "FC") for b in ("PC", "PCS")],
     [("blocking_force_per_pressure", a, ">", b) for a, b in (("PR", "P"), ("P", "TP"))]
     + [("blocking_force_per_pressure", a, ">", b) for a, b in (("FC", "TPC"), ("TPC", "PC"), ("PC", "PCS"))],
     [("blocking_force_per_pressure", "TP", ">", "FC"), ("blocking_force_per_pressure", "TFC", ">", "FC")],

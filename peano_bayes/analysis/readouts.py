@@ -47,11 +47,14 @@ def _sorted(s, f):
     return s[order], f[order]
 
 
-def free_strain(strain, force_n, fit_fraction: float = 0.2) -> float:
-    """Strain where the relaxing curve reaches zero force [-].
+def extrapolated_free_strain(strain, force_n, fit_fraction: float = 0.2) -> float:
+    """The paper's reading of the free strain [-]: where the relaxing curve of a measured load cycle reaches zero
+    force.
 
     The rig stops at the start tension, so the last ``fit_fraction`` of the relaxing branch's strain range is
-    extrapolated linearly to F = 0 (the value is taken directly if the branch reaches zero force).
+    extrapolated linearly to F = 0 (the value is taken directly if the branch reaches zero force). The branch
+    still bends there, so on the bundled muscles this reads 0.02-0.08 below the muscle's own free strain
+    (:func:`peano_bayes.physics.free_strain`, what the metrics report as ``free_strain``).
     """
     _, (s_down, f_down) = _branches(strain, force_n)
     if np.any(f_down <= 0):
@@ -71,7 +74,7 @@ def energy_per_pressure(strain, force_n, pressure_pa, flat_length_m, from_strain
     """
     _, (s_down, f_down) = _branches(strain, force_n)
     s, f = _sorted(s_down, f_down)
-    eps_free = free_strain(strain, force_n)
+    eps_free = extrapolated_free_strain(strain, force_n)
     start = s.min() if from_strain is None else from_strain
     inside = s >= start
     grid = np.concatenate([[start], s[inside]]) if s.min() < start else s[inside]
