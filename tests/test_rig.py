@@ -188,7 +188,7 @@ def test_quirks_switch_elements_and_fall_back_to_nominal():
     assert config.extension and config.threshold and config.damping
     with pytest.raises(PeanoBayesInputError, match=r"unknown quirk 'hysterisis' \(did you mean 'hysteresis'\?\)"):
         simulate_dataset("FC", quirks=["hysterisis"])
-    with pytest.raises(PeanoBayesInputError, match="known quirks: series_compliance, hysteresis"):
+    with pytest.raises(PeanoBayesInputError, match=r"no such element yet\); known quirks: hysteresis, viscoelastic"):
         simulate_dataset("FC", quirks=["cyclic_softening"])
 
 

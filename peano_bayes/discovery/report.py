@@ -123,7 +123,7 @@ def _signature_lines(rounds: list) -> list[str]:
 
 def _evidence_phrase(step: dict) -> str:
     """Whether a step's effect was named on its own signature's evidence, in words."""
-    if step["kind"] != "physics":
+    if step.get("kind", "physics") != "physics":  # (a report from before steps recorded their kind: physics)
         return "not physics, never named"
     if step.get("named", True):
         return "significant before and halved or more after, so it is named"
