@@ -4,6 +4,7 @@ bad and impossible requirements with the key named, and candidates are scored mo
 import json
 import shutil
 from pathlib import Path
+from types import SimpleNamespace
 
 import arviz as az
 import jax
@@ -200,7 +201,12 @@ def test_125_um_ldpe_is_refused_above_its_burst_pressure_and_materials_beyond_th
     assert any("tested at" in r and "extrapolate" in r for r in reasons)
     assert limit_violations("FC", 200e3) == [] and limit_violations("P", 30e3) == []
     assert any("tested at" in r for r in limit_violations("FC", 250e3))
-    assert limit_violations("VM", 900e3) == []  # no bundled limits for a material of one's own
+    # a material of one's own: limited by the test pressure of its result's data, refused where none is known
+    assert "none is known" in limit_violations("VM", 100e3)[0]
+    mine = SimpleNamespace(posterior=SimpleNamespace(attrs={"conditions": json.dumps({"test_pressure_pa": 1.5e5})}))
+    assert limit_violations("VM", 150e3, mine) == []
+    (reason,) = limit_violations("VM", 900e3, mine)
+    assert "above the 150 kPa VM was tested at" in reason and "extrapolate" in reason
 
 
 def test_a_candidate_beyond_its_materials_limit_is_infeasible_with_the_reason(results, tmp_path):
@@ -210,6 +216,22 @@ def test_a_candidate_beyond_its_materials_limit_is_infeasible_with_the_reason(re
     assert top["probability"] == 0.0 and "tested at" in top["infeasible"][0]
     assert "is infeasible" in report["explanation"]
     assert "Infeasible: TP:" in recommendation_markdown(report)
+
+
+def test_a_users_material_above_the_pressure_its_data_were_tested_at_is_refused_and_its_limit_shown(results, tmp_path):
+    """A material of one's own (no bundled limits): its limit is the test pressure of the data its result was
+    fitted to; a spec above it gets no probability, the reason, and the limit in the report's ``limits``."""
+    root = tmp_path / "mine"
+    shutil.copytree(results / "TP", root / "VM")
+    idata = az.from_netcdf(root / "VM" / "posterior.nc")
+    idata.posterior.attrs["conditions"] = json.dumps({"test_pressure_pa": 20e3})
+    idata.to_netcdf(str(root / "VM" / "posterior.nc.new"))
+    (root / "VM" / "posterior.nc.new").replace(root / "VM" / "posterior.nc")
+    spec = _spec(tmp_path, GOOD, "materials = ['VM']\nn_tubes = [4]\ntube_width_mm = [15]\n")
+    report = recommend(spec, root, log=lambda m: None)
+    assert report["limits"]["VM"]["max_tested_kpa"] == 20.0
+    (top,) = report["candidates"]
+    assert top["probability"] == 0.0 and "above the 20 kPa VM was tested at" in top["infeasible"][0]
 
 
 def test_new_specimens_carry_the_between_specimen_spread_on_the_wall_stiffnesses_only():

@@ -254,13 +254,30 @@ def thickness_m(geometry: Geometry, code: str | None = None) -> float:
     return 2.0 * (geometry.tube_width_m + h0) / math.pi + 2.0 * walls
 
 
-def limit_violations(code: str, max_pressure_pa: float) -> list[str]:
-    """Why a material cannot be used at ``max_pressure_pa``: above its highest tested pressure or a reported
-    burst pressure (:func:`design_limits`); empty when it can, or for a material with no bundled limits."""
+def material_limits(code: str, idata=None) -> dict | None:
+    """The pressure limits of material ``code``: ``max_tested_kpa``, ``burst_kpa`` where known, and ``source``.
+    The bundled ``design_limits.toml`` for the paper's materials; for any other, the test pressure of the data
+    its result was fitted to (``idata``'s ``conditions``), the highest pressure its posterior has seen. ``None``
+    where neither says (then :func:`limit_violations` refuses every pressure: a material is never extrapolated
+    silently)."""
     limits = design_limits()["pressure"].get(code)
-    if limits is None:
-        return []
+    if limits is not None:
+        return dict(limits)
+    raw = None if idata is None else idata.posterior.attrs.get("conditions")
+    tested = json.loads(raw).get("test_pressure_pa") if raw else None
+    if tested is None:
+        return None
+    return {"max_tested_kpa": float(tested) / 1e3, "source": "the test pressure of the data its result was fitted to"}
+
+
+def limit_violations(code: str, max_pressure_pa: float, idata=None) -> list[str]:
+    """Why a material cannot be used at ``max_pressure_pa``: above its highest tested pressure or a known burst
+    pressure (:func:`material_limits` of ``code`` and its result ``idata``); empty when it can. With no limits
+    known every pressure is refused: its tested pressure is unknown, so the posterior's validity there is too."""
+    limits = material_limits(code, idata)
     kpa = max_pressure_pa / 1e3
+    if limits is None:
+        return [f"{kpa:g} kPa cannot be checked against the pressure {code} was tested at: none is known"]
     reasons = []
     if "burst_kpa" in limits and kpa > limits["burst_kpa"]:
         reasons.append(
@@ -392,7 +409,7 @@ def evaluate_candidates(
         )
         removed += [f"{code}: {a}" for a in artefacts]
         reference = _result_geometry(idata)
-        infeasible = limit_violations(code, req.max_pressure_pa)
+        infeasible = limit_violations(code, req.max_pressure_pa, idata)
         log(f"{code}: {len(param_sets)} posterior draws (new specimens) over the candidate geometries")
         for n, w, length in itertools.product(spec.n_tubes, spec.tube_width_m, spec.tube_length_m):
             target = Geometry(n_tubes=n, tube_width_m=w, tube_length_m=length)
@@ -536,6 +553,7 @@ def recommend(
     return {
         "spec": str(spec.source),
         "requirement": spec.requirement.__dict__,
+        "limits": {code: material_limits(code, idata) for code, (idata, _) in materials.items()},
         "candidates": candidates,
         "explanation": explain(candidates[0], spec.requirement),
         "removed": removed,
