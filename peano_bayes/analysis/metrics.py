@@ -166,6 +166,12 @@ STEP_METRICS = ("speed", "power_per_pressure", "efficiency", "overshoot")
 NOISELESS = RigNoise(0.0, 0.0, 0.0, 0.0, 0.0)
 
 
+def _config_params(params: dict, config: ModelConfig) -> dict:
+    """``params`` [SI] as float64 arrays, with the nominal value of every parameter ``config`` reads that they
+    lack."""
+    return {k: jnp.asarray(v, jnp.float64) for k, v in {**config.nominal_parameters(), **params}.items()}
+
+
 @partial(jax.jit, static_argnames="config")
 def _zero_kpa_stretch(params, time_s, *, config):
     strain = jnp.interp(time_s, jnp.array([0.0, 20.0, 40.0]), jnp.array([0.0, -0.03, 0.0]))
@@ -176,8 +182,7 @@ def _zero_kpa_stretch(params, time_s, *, config):
 def zero_kpa_stiffness(params: dict, config: ModelConfig = DEFAULT_CONFIG, geometry: Geometry = PAPER_GEOMETRY):
     """Tangent stiffness at -1.5 % strain and 0 kPa [N/m] of a noise-free stretch from 0 to -3 % strain and back
     over 40 s (20 Hz); ``params`` [SI] missing a name the ``config`` reads take its nominal value."""
-    full = {**config.nominal_parameters(), **params}
-    jparams = {k: jnp.asarray(v, jnp.float64) for k, v in full.items()}
+    jparams = _config_params(params, config)
     strain, force = _zero_kpa_stretch(jparams, jnp.arange(801) / 20.0, config=config)
     return stiffness(np.asarray(strain), np.asarray(force), geometry.flat_length_m)
 
@@ -191,8 +196,7 @@ def model_free_strain(
     """The muscle's own free strain [-] at ``pressure_pa`` [Pa] (:func:`peano_bayes.physics.free_strain`: the
     contracting branch at that pressure followed to zero force); ``params`` [SI] missing a name the ``config``
     reads take its nominal value."""
-    full = {**config.nominal_parameters(), **params}
-    jparams = {k: jnp.asarray(v, jnp.float64) for k, v in full.items() if k in config.parameter_names()}
+    jparams = _config_params(params, config)
     return float(_free_strain(jparams, jnp.asarray(pressure_pa, jnp.float64), config=config, geometry=geometry))
 
 

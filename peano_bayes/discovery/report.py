@@ -134,6 +134,9 @@ def report_markdown(report: dict) -> str:
     """The report in words a materials engineer reads."""
     lines = [f"# Discovery report: specimen {report['specimen']}", ""]
     verdict = report["verdict"]
+    # what the final model needed without naming it: the session baseline, or physics without its own evidence
+    described_baseline = [d for d in report["described"] if d in FLEXIBLE_TERMS]
+    described_physics = [d for d in report["described"] if d not in FLEXIBLE_TERMS]
     if verdict == "named":
         lines.append(f"**Verdict: the data show {', '.join(report['named'])}**, which the base model lacked.")
     elif verdict == "ambiguous":
@@ -151,20 +154,18 @@ def report_markdown(report: dict) -> str:
             "least squares, as `fit --discover` does)."
         )
     elif verdict == "unexplained":
-        baseline = [d for d in report["described"] if d in FLEXIBLE_TERMS]
-        physics = [d for d in report["described"] if d not in FLEXIBLE_TERMS]
-        if baseline and report.get("drift_shown", False):
+        if described_baseline and report.get("drift_shown", False):
             lines.append(
                 "**Verdict: unexplained.** The force drifts slowly over the session in a way no effect in the "
                 "library produces; a smooth baseline over session time describes it (step "
-                f"{', '.join(f'`{d}`' for d in baseline)} below), but it names no physics. The repeats "
+                f"{', '.join(f'`{d}`' for d in described_baseline)} below), but it names no physics. The repeats "
                 "of a test condition show the trend in time, so a load-cell drift or a slow change of the specimen "
                 "are likely: re-zero the load cell between tests, or repeat the first test at the end of the session."
             )
-        elif baseline:
+        elif described_baseline:
             lines.append(
                 "**Verdict: unexplained.** The residuals follow the order of the tests in the session, which a "
-                f"smooth baseline over session time describes (step {', '.join(f'`{d}`' for d in baseline)} "
+                f"smooth baseline over session time describes (step {', '.join(f'`{d}`' for d in described_baseline)} "
                 "below), but the repeats of each test condition show no trend in time: the misfit is ordered with "
                 "the conditions (here, pressure) as much as with time, and no cause is named. Repeating a condition "
                 "at the end of the session would tell a drift from a pressure-dependent misfit."
@@ -174,16 +175,14 @@ def report_markdown(report: dict) -> str:
                 "**Verdict: unexplained.** The residuals keep structure that no effect in the library explains on "
                 "its own evidence. Look at the residual figure for its shape; no cause is named."
             )
-        if physics:
+        if described_physics:
             lines.append(
-                f"\n{', '.join(f'`{d}`' for d in physics)} improved the prediction of the held-out runs, but its "
-                "own residual signature was not significant before it was added or did not fall by half with it "
-                "(see its step below): it describes the misfit here and is not named as physics."
+                "\n" + ", ".join(f"`{d}`" for d in described_physics) + " improved the prediction of the held-out "
+                "runs, but its own residual signature was not significant before it was added or did not fall by half "
+                "with it (see its step below): it describes the misfit here and is not named as physics."
             )
     else:
         lines.append("**Verdict: none.** No effect beyond the base model is supported by the data.")
-    described_baseline = [d for d in report["described"] if d in FLEXIBLE_TERMS]
-    described_physics = [d for d in report["described"] if d not in FLEXIBLE_TERMS]
     if described_baseline and verdict != "unexplained":
         trend = (
             "The force also drifts slowly over the session"
