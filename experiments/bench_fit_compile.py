@@ -34,12 +34,12 @@ import optimistix as optx  # noqa: E402
 from peano_bayes.bundled import dataset_path  # noqa: E402
 from peano_bayes.data import load  # noqa: E402
 from peano_bayes.discovery import discovery_data  # noqa: E402
-from peano_bayes.discovery.fitting import BATCH, MAX_STEPS, _objective  # noqa: E402
+from peano_bayes.discovery.fitting import BATCH, MAX_STEPS, discovery_residuals  # noqa: E402
 from peano_bayes.discovery.model import DEFAULT_BASE, model_spec, to_unconstrained  # noqa: E402
 from peano_bayes.inference.fit import (  # noqa: E402
     DEFAULT_NOISE,
-    _prior_spread,
     dense_jacobian,
+    prior_spread,
     residual_function,
 )
 from peano_bayes.inference.prior_files import prior_for  # noqa: E402
@@ -70,7 +70,7 @@ def inference_fns(code: str, n_starts: int):
     observations = prepare(dataset)
     prior = prior_for(code).for_config(likelihood=False)
     fixed = {k: jnp.asarray(v) for k, v in prior.config.nominal_parameters().items() if k not in prior.names}
-    plain = residual_function(observations, prior, prior.config, DEFAULT_NOISE, _prior_spread(prior, 0), fixed)
+    plain = residual_function(observations, prior, prior.config, DEFAULT_NOISE, prior_spread(prior, 0), fixed)
     starts = jnp.asarray(np.vstack([np.asarray(prior.median_unconstrained())[None], prior.sample(0, n_starts - 1)]))
 
     def solver(fn):
@@ -94,7 +94,7 @@ def discovery_fns():
     rng = np.random.default_rng(0)
     starts = jnp.asarray(u0 + np.where(spec.mask, 0.1 * rng.standard_normal((BATCH, u0.size)), 0.0))
     masks, pinned = jnp.asarray(np.stack([spec.mask] * BATCH)), jnp.asarray(np.stack([spec.pinned] * BATCH))
-    plain = lambda u, args: _objective(u, *args)[0]  # noqa: E731
+    plain = lambda u, args: discovery_residuals(u, *args)[0]  # noqa: E731
 
     def solver(fn):
         def solve(starts, masks, pinned, data):

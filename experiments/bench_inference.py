@@ -52,8 +52,8 @@ from peano_bayes.bundled import dataset_path
 from peano_bayes.data import load
 from peano_bayes.discovery.choice import configured_model
 from peano_bayes.inference import build_posterior, prepare
-from peano_bayes.inference.driver import _linearisation_point
-from peano_bayes.inference.laplace import _laplace_covariance, finite_difference_hessian
+from peano_bayes.inference.driver import linearisation_point
+from peano_bayes.inference.laplace import capped_covariance, finite_difference_hessian
 from peano_bayes.inference.posterior import DEFAULT_HELD
 from peano_bayes.jax_config import enable_compilation_cache
 from peano_bayes.physics import LoadCycle, simulate_load_cycle
@@ -69,7 +69,7 @@ def sampled_posterior(material: str, fit_dir: Path):
     config = configured_model(whole.config).config
     posterior = build_posterior(prepare(dataset), whole.for_config(config), config=config, held=DEFAULT_HELD)
     # as a resumed fit reads it back (and refuses a record over other parameters)
-    point, lag1 = _linearisation_point(fit_dir / "input_error_point.json", fit_dir / "sampler_state.npz", posterior)
+    point, lag1, _ = linearisation_point(fit_dir / "input_error_point.json", fit_dir / "sampler_state.npz", posterior)
     return posterior.with_input_error_at(point).with_residual_lag1(lag1), point, config
 
 
@@ -107,12 +107,12 @@ def min_ess(draws: np.ndarray) -> float:
 
 def laplace_inverse_mass(potential, centre: np.ndarray) -> np.ndarray:
     """(D, D) inverse Hessian of ``potential`` at ``centre`` (central differences of its JAX gradient), floored and
-    capped as the mode search does (:func:`~peano_bayes.inference.laplace._laplace_covariance`, sd at most 3):
+    capped as the mode search does (:func:`~peano_bayes.inference.laplace.capped_covariance`, sd at most 3):
     NUTS's initial inverse mass matrix, the same curvature ours starts its walkers from. Without it (unit mass)
     NUTS's warm-up ran at 20-27 s per iteration on TP (up to 1023 leapfrog steps of size 1e-4)."""
     centre = np.asarray(centre, dtype=float)
     hessian = finite_difference_hessian(jax.jit(jax.grad(potential)), centre)
-    return _laplace_covariance(hessian, 9.0 * np.eye(centre.size), max_sd=3.0)
+    return capped_covariance(hessian, 9.0 * np.eye(centre.size), max_sd=3.0)
 
 
 def run_nuts(posterior, centre, warmup: int, samples: int) -> dict:

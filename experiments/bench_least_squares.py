@@ -70,14 +70,14 @@ def measure(dataset: Dataset) -> dict:
     return {
         "bins": int(observations.n_bins),
         "max_force_n": round(force, 1),
-        "converged": fitted["converged"],
-        "rounds": fitted["rounds"],
-        "n_failed": fitted["n_failed"],
-        "n_step_limit": fitted["n_step_limit"],
-        "cost": round(fitted["cost"], 3),
+        "converged": fitted.converged,
+        "rounds": fitted.rounds,
+        "n_failed": fitted.n_failed,
+        "n_step_limit": fitted.n_step_limit,
+        "cost": round(fitted.cost, 3),
         # RMSE of the least-squares point per test [N or -], one parameter value shared by the specimens
-        "rmse": {test: round(q["rmse"], 6) for test, q in fitted["quality"].items()},
-        "seconds": round(fitted["seconds"], 1),
+        "rmse": {test: round(q["rmse"], 6) for test, q in fitted.quality.items()},
+        "seconds": round(fitted.seconds, 1),
     }
 
 

@@ -38,7 +38,7 @@ from peano_bayes.bundled import dataset_path
 from peano_bayes.data import load
 from peano_bayes.discovery.choice import configured_model
 from peano_bayes.inference import prepare
-from peano_bayes.inference.likelihood import _simulate
+from peano_bayes.inference.likelihood import simulate_test
 from peano_bayes.jax_config import enable_compilation_cache
 from peano_bayes.physics import simulate
 
@@ -71,7 +71,7 @@ def simulator(groups, config, geometry):
         for g in groups:
 
             def row(time_s, strain, pressure_pa, load_n, test=g.test):
-                return _simulate(test, params, time_s, strain, pressure_pa, None, load_n, config, geometry)[0]
+                return simulate_test(test, params, time_s, strain, pressure_pa, None, load_n, config, geometry)[0]
 
             inputs = (g.time_s, g.strain, g.pressure_pa, g.load_n)
             out.append(jax.vmap(row)(*(jnp.asarray(a, dtype=jnp.float64) for a in inputs)))

@@ -37,7 +37,7 @@ OURS = {"bracket_atol": simulate._DYNAMIC_BRACKET_ATOL, "newton_steps": simulate
 def _timed(setting: dict, group, config, geometry, batch, repeats: int):
     simulate._DYNAMIC_BRACKET_ATOL, simulate.DYNAMIC_ITERATIONS = setting["bracket_atol"], setting["newton_steps"]
     strain, pressure = jnp.asarray(group.strain), jnp.asarray(group.pressure_pa)
-    f = jax.jit(jax.vmap(lambda p: likelihood._predict_sets(p, group, strain, pressure, config, geometry)))
+    f = jax.jit(jax.vmap(lambda p: likelihood.predict_sets(p, group, strain, pressure, config, geometry)))
     predicted, error = (np.asarray(a) for a in f(batch))  # compiles (the setting is read when tracing)
     best = np.inf
     for _ in range(repeats):

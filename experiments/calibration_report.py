@@ -108,7 +108,7 @@ def _free_strain_reached(dataset, out: dict, strokes) -> dict:
     """
     ends = []
     for run in _pressurized_cycles(dataset):
-        (_, _), (s_down, f_down) = table3._branches(run.strain, run.force_n)
+        (_, _), (s_down, f_down) = table3.loop_branches(run.strain, run.force_n)
         i = int(np.argmin(f_down))
         ends.append((float(s_down[i]), float(f_down[i])))
     cycle_strain, cycle_force = (float(np.mean(v)) for v in zip(*ends, strict=True))

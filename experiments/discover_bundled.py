@@ -22,7 +22,7 @@ from peano_bayes.app.pipeline import BUNDLED_MATERIALS
 from peano_bayes.atomic import write_text
 from peano_bayes.data import load
 from peano_bayes.discovery import Gates, discover, discovery_data, write_report
-from peano_bayes.effects import PHYSICS_EFFECTS
+from peano_bayes.effects import physics_effects
 
 HERE = Path(__file__).resolve().parent
 TESTS = ("load_cycle", "blocking", "stroke")
@@ -71,7 +71,7 @@ def main(argv=None) -> int:
             report = result.report
         truth = generating_effects(dataset)
         # Physics only: a noise-side winner of an ambiguous step (a sensor gain against a mount) is in noise_model.
-        rivals = [e for a in report["ambiguous"] for e in a["effects"] if e in PHYSICS_EFFECTS]
+        rivals = [e for a in report["ambiguous"] for e in a["effects"] if e in physics_effects()]
         found = report["named"] + [e for e in rivals if e not in report["named"]]
         rows.append(
             {

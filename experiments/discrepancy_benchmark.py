@@ -41,11 +41,11 @@ from peano_bayes.app.fanout import Unit, make_executor, run_units
 from peano_bayes.atomic import write_text
 from peano_bayes.errors import PeanoBayesInputError
 from peano_bayes.validation.discovery_benchmark import (
-    HIDEABLE,
-    NOT_HIDEABLE,
     TWO_MOUNTS,
     Case,
     failed_row,
+    hideable_names,
+    not_hideable,
     run_case,
     run_key,
     strength_for_snr,
@@ -57,7 +57,7 @@ TWO_EFFECTS = ("hysteresis", "flow_restriction")
 
 
 CASE_LABELS = (
-    *HIDEABLE,
+    *hideable_names(),
     "none",
     "drift",
     "+".join(TWO_EFFECTS),
@@ -69,7 +69,7 @@ CASE_LABELS = (
 
 def cases(snrs, noise_levels, only=None) -> list[Case]:
     """Every case, or those whose label is in ``only`` (``none`` covers every noise level)."""
-    out = [Case((e,), snr) for snr in snrs for e in HIDEABLE]
+    out = [Case((e,), snr) for snr in snrs for e in hideable_names()]
     out += [Case(force_sd_n=sd) for sd in noise_levels]
     out += [Case(drift=True), Case(TWO_EFFECTS, max(snrs))]
     out += [Case(physics="veale")]  # the null on another physics: Veale's force-balance model
@@ -233,7 +233,7 @@ def analyse(rows: list[dict], out: Path, pooled_from=()) -> dict:
         "two_effects_exact": float(two["correct"].mean()) if len(two) else None,
         "gap_ratio_median_on_hits": float(hits["gap_ratio"].median()) if len(hits) else None,
         "gap_share_at_most_half_on_hits": float(np.mean(hits["gap_ratio"] <= 0.5)) if len(hits) else None,
-        "not_hideable": list(NOT_HIDEABLE),
+        "not_hideable": list(not_hideable()),
         "median_seconds_per_run": float(df["seconds"].median()) if "seconds" in df else None,
     }
     md = [
@@ -248,7 +248,7 @@ def analyse(rows: list[dict], out: Path, pooled_from=()) -> dict:
             "seed history in experiments/discrepancy_benchmark.py). "
         )
         + "Effects that cannot be hidden "
-        f"(part of every base model): {', '.join(NOT_HIDEABLE)}.",
+        f"(part of every base model): {', '.join(not_hideable())}.",
         "",
         "## Recall per effect (Wilson 95 % interval)",
         "",

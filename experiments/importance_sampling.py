@@ -36,7 +36,8 @@ from peano_bayes.app.pipeline import prior_of, select_tests
 from peano_bayes.bundled import dataset_path
 from peano_bayes.data import load
 from peano_bayes.inference.driver import posterior_at_mode, walker_start
-from peano_bayes.inference.laplace import NonCentred, _in_eta
+from peano_bayes.inference.fit import FitResult
+from peano_bayes.inference.laplace import NonCentred, covariance_in_eta
 from peano_bayes.inference.posterior import DEFAULT_HELD, build_posterior
 from peano_bayes.inference.reduce import prepare
 from peano_bayes.inference.sample import IndependenceProposal
@@ -52,7 +53,7 @@ def rebuild(result: Path):
     """The posterior the certified run sampled (inputs' error linearised and AR(1) lags as ``infer`` set them),
     its Laplace approximation on the full likelihood, and the non-centred map."""
     summary = json.loads((result / "summary.json").read_text())
-    fitted = json.loads((result / "fit.json").read_text())
+    fitted = FitResult.from_json(json.loads((result / "fit.json").read_text()), where=str(result / "fit.json"))
     dataset = select_tests(load(dataset_path(summary["material"])), summary["tests"])
     whole_prior = prior_of(dataset, None)
     config = whole_prior.config
@@ -100,7 +101,7 @@ def main(argv=None) -> int:
         return np.where(np.isfinite(lp), lp + nc.log_jacobian(eta), -np.inf)
 
     eta_mode = nc.to_eta(laplace.mode)
-    mean, scale = eta_mode, args.inflate**2 * _in_eta(nc.jacobian(eta_mode), laplace.covariance)
+    mean, scale = eta_mode, args.inflate**2 * covariance_in_eta(nc.jacobian(eta_mode), laplace.covariance)
     rng = np.random.default_rng(args.seed)
     rounds = []
     for r in range(args.rounds):

@@ -23,7 +23,7 @@ from peano_bayes.bundled import dataset_path
 from peano_bayes.data import load
 from peano_bayes.discovery.choice import choose_model
 
-PROGRAMS = {"solve": "_solve", "jacobian": "_jacobian", "evaluate": "_pointwise"}
+PROGRAMS = {"solve": "solve_batch", "jacobian": "jacobian_of", "evaluate": "pointwise"}
 
 
 def timed_programs() -> dict:

@@ -11,7 +11,7 @@ workflow version's tuning round, how much a signature could see:
   computes them (:func:`~peano_bayes.discovery.diagnose.diagnose`, after :func:`~peano_bayes.discovery.workflow.
   fit_base`); on a seed of a recorded run they equal that row's first diagnosis (the script's consistency check);
 - **matched signatures** ``matched:<effect>``: the standardized change of every fitted bin's prediction when the
-  effect is switched on at the start discovery's screen uses (:func:`~peano_bayes.discovery.workflow._start`,
+  effect is switched on at the start discovery's screen uses (:func:`~peano_bayes.discovery.workflow.effect_start`,
   the library's start strength around the base fit), with the base fit's own Jacobian columns projected out (what
   the refitted base can absorb), so under white unit residuals ``T`` is a z-score; ``p`` by the same block sign
   flips. This is the score-test direction of the effect, across every fitted test.
@@ -46,9 +46,9 @@ from peano_bayes import enable_compilation_cache
 from peano_bayes.atomic import write_text
 from peano_bayes.discovery import discovery_data
 from peano_bayes.discovery.diagnose import diagnose, sign_flip_p, sign_flips, signature_statistic
-from peano_bayes.discovery.fitting import _jacobian, _pointwise, evaluate
+from peano_bayes.discovery.fitting import evaluate, jacobian_of, pointwise
 from peano_bayes.discovery.model import DEFAULT_BASE
-from peano_bayes.discovery.workflow import Gates, _start, fit_base
+from peano_bayes.discovery.workflow import Gates, effect_start, fit_base
 from peano_bayes.effects import LIBRARY
 from peano_bayes.validation.discovery_benchmark import hidden_dataset, run_key
 
@@ -77,13 +77,13 @@ def signature_test(w: np.ndarray, r: np.ndarray, blocks: np.ndarray, flips: np.n
 def matched_weights(base, effects, split) -> dict[str, np.ndarray]:
     """Per effect, its standardized prediction change (n,) from the base fit to the screen's start, with the base
     fit's Jacobian columns (its free parameters, on the fitted bins) projected out."""
-    r0 = np.asarray(_pointwise(jnp.asarray(base.x), split.fit).r)
+    r0 = np.asarray(pointwise(jnp.asarray(base.x), split.fit).r)
     args = (jnp.asarray(base.u), jnp.asarray(base.spec.mask), jnp.asarray(base.spec.pinned), split.fit)
-    j = np.asarray(_jacobian(*args)[0])[: r0.size][:, base.spec.mask]
+    j = np.asarray(jacobian_of(*args)[0])[: r0.size][:, base.spec.mask]
     pinv = np.linalg.pinv(j, rcond=1e-10) if np.all(np.isfinite(j)) else None
     out = {}
     for effect in effects:
-        d = r0 - np.asarray(_pointwise(jnp.asarray(_start(base, effect)), split.fit).r)  # (with - without) / sd
+        d = r0 - np.asarray(pointwise(jnp.asarray(effect_start(base, effect)), split.fit).r)  # (with - without) / sd
         out[effect] = d - j @ (pinv @ d) if pinv is not None and np.all(np.isfinite(d)) else np.full(d.shape, np.nan)
     return out
 

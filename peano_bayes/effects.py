@@ -380,17 +380,34 @@ _REGISTRY: dict[str, Effect] = {e.name: e for e in _LIST}
 #: name -> :class:`Effect`: every registered effect, in registration order (a live, read-only view: what
 #: :func:`register` adds appears here). Discovery screens every effect of it not in the model.
 LIBRARY: Mapping[str, Effect] = MappingProxyType(_REGISTRY)
-#: The physics effects (elements of the muscle model).
-PHYSICS_EFFECTS: tuple[str, ...] = tuple(e.name for e in _LIST if e.kind == "physics")
-#: Noise-side alternatives: never reported as physics.
-NOISE_EFFECTS: tuple[str, ...] = tuple(e.name for e in _LIST if e.kind == "noise")
-#: Flexible terms: they describe leftover structure and never name an effect.
-FLEXIBLE_TERMS: tuple[str, ...] = tuple(e.name for e in _LIST if e.kind == "flexible")
+
+
+def of_kind(kind: str) -> tuple[str, ...]:
+    """Names of the registered effects of ``kind`` (``"physics"``, ``"noise"`` or ``"flexible"``), in registry
+    order; read from the live registry, so an effect :func:`register` adds is among them."""
+    return tuple(e.name for e in LIBRARY.values() if e.kind == kind)
+
+
+def physics_effects() -> tuple[str, ...]:
+    """The physics effects (elements of the muscle model): the only kind discovery names."""
+    return of_kind("physics")
+
+
+def noise_effects() -> tuple[str, ...]:
+    """Noise-side alternatives: never reported as physics."""
+    return of_kind("noise")
+
+
+def flexible_terms() -> tuple[str, ...]:
+    """Flexible terms: they describe leftover structure and never name an effect."""
+    return of_kind("flexible")
+
+
 #: Noise-side effects that widen the noise instead of moving the prediction: they can mimic any misfit, so the
 #: workflow accepts them only when nothing else passes (a sensor offset or gain moves the prediction and competes
 #: with physics on held-out gain).
 WIDENING_NOISE: tuple[str, ...] = ("heteroscedastic_noise",)
-assert set(WIDENING_NOISE) <= set(NOISE_EFFECTS)
+assert set(WIDENING_NOISE) <= set(noise_effects())
 
 #: Pairs the rig's four tests cannot always tell apart, and the experiment that separates them
 #: An ``ambiguous`` verdict names one of these.
@@ -510,11 +527,12 @@ __all__ = [
     "CONFUSABLE",
     "EXTRA_PARAMETERS",
     "Effect",
-    "FLEXIBLE_TERMS",
+    "flexible_terms",
     "LIBRARY",
-    "NOISE_EFFECTS",
+    "noise_effects",
+    "of_kind",
     "OPEN_ORIFICE_M2",
-    "PHYSICS_EFFECTS",
+    "physics_effects",
     "RIGID_TENSILE_N_PER_M",
     "WIDENING_NOISE",
     "check_effects",

@@ -21,7 +21,7 @@ from peano_bayes.data import save
 from peano_bayes.discovery import LIBRARY, discovery_data
 from peano_bayes.discovery.data import DISCOVERY_BIN_SIZES, DISCOVERY_EVERY_SAMPLE
 from peano_bayes.discovery.diagnose import diagnose, signature_statistic, signature_weights
-from peano_bayes.discovery.fitting import ModelFit, _pointwise
+from peano_bayes.discovery.fitting import ModelFit, pointwise
 from peano_bayes.discovery.model import (
     DEFAULT_BASE,
     NAMES,
@@ -45,19 +45,19 @@ from peano_bayes.effects import (
     BASELINE_PARAMETERS,
     CONFUSABLE,
     EXTRA_PARAMETERS,
-    FLEXIBLE_TERMS,
-    NOISE_EFFECTS,
-    PHYSICS_EFFECTS,
+    flexible_terms,
+    noise_effects,
+    physics_effects,
 )
 from peano_bayes.inference.likelihood import predict
 from peano_bayes.inference.reduce import prepare
 from peano_bayes.physics import PARAMETERS
 from peano_bayes.validation.discovery_benchmark import (
-    HIDEABLE,
     TRUTH_CONFIG,
     TRUTH_PARAMS,
     Case,
     hidden_dataset,
+    hideable_names,
     run_case,
     run_key,
     score,
@@ -90,9 +90,9 @@ DESIGN_EFFECTS = (
 
 
 def test_library_has_every_design_effect_and_noise_alternatives():
-    assert set(DESIGN_EFFECTS) == set(PHYSICS_EFFECTS)
-    assert {"sensor_offset", "sensor_gain", "heteroscedastic_noise"} <= set(NOISE_EFFECTS)
-    assert FLEXIBLE_TERMS == ("session_baseline",) and not set(FLEXIBLE_TERMS) & set(PHYSICS_EFFECTS)
+    assert set(DESIGN_EFFECTS) == set(physics_effects())
+    assert {"sensor_offset", "sensor_gain", "heteroscedastic_noise"} <= set(noise_effects())
+    assert flexible_terms() == ("session_baseline",) and not set(flexible_terms()) & set(physics_effects())
     for effect in LIBRARY.values():
         assert set(effect.off) <= set(effect.params), effect.name
         assert set(effect.strength) <= set(effect.off), effect.name
@@ -134,7 +134,7 @@ def test_session_baseline_adds_legendre_polynomials_of_session_time_to_the_force
     for name, value in c.items():
         x1[NAMES.index(name)] = value
     data = split.both
-    shift = np.asarray(_pointwise(x1, data).predicted) - np.asarray(_pointwise(x0, data).predicted)
+    shift = np.asarray(pointwise(x1, data).predicted) - np.asarray(pointwise(x0, data).predicted)
     s = np.concatenate([np.ravel(a) for a in data.session])
     session_s = np.concatenate([split.fit_covariates.session_s, split.held_out_covariates.session_s])
     assert s.min() >= -1.0 and s.max() <= 1.0 and s.max() - s.min() > 1.9
@@ -391,7 +391,7 @@ def test_the_harness_hides_each_effect_in_that_effects_own_parameters_away_from_
     """What the identifiability probe fits as the truth: the rig's parameters, with only the hidden effect's
     parameters changed, and its strength parameters not at the library's off value."""
     assert true_parameters((), {}) == dict(TRUTH_PARAMS)
-    for effect in HIDEABLE:
+    for effect in hideable_names():
         truth = true_parameters((effect,), {effect: 1.5})
         changed = {k for k in truth if truth[k] != TRUTH_PARAMS.get(k)}
         assert changed and changed <= set(LIBRARY[effect].params), (effect, changed)
@@ -516,7 +516,7 @@ def test_fit_models_solves_in_batches_of_one_shape(monkeypatch):
         k = u0.shape[0]
         return u0, np.full(k, np.inf), np.zeros(k, dtype=bool)  # every fit "failed": no Laplace step
 
-    monkeypatch.setattr(fitting, "_solve", fake_solve)
+    monkeypatch.setattr(fitting, "solve_batch", fake_solve)
     spec = model_spec(DEFAULT_BASE, TRUTH_PARAMS)
     starts = [spec.pinned * (1.0 + 0.01 * i) for i in range(fitting.BATCH + 1)]
     assert fitting.fit_models([spec] * len(starts), starts, data=None) == [None] * len(starts)
@@ -876,7 +876,7 @@ def test_the_stroke_inputs_error_is_estimated_from_the_fitted_runs_as_the_infere
 
     truth = {n: v for n, v in TRUTH_PARAMS.items() if n in NAMES}
     x = model_spec(DEFAULT_BASE, truth).pinned
-    flat = _pointwise(jax.numpy.asarray(x), split.fit)
+    flat = pointwise(jax.numpy.asarray(x), split.fit)
     (group,), (sd,) = split.fit.groups, split.fit.sd
     columns = np.asarray(group.pressure_error)  # (r, q, L), one column set shared by the condition
     # The plain prediction (n_error_sets=0: no input-error Jacobian), an independent route to the derivative.
@@ -923,15 +923,15 @@ def test_the_stroke_inputs_error_is_estimated_from_the_fitted_runs_as_the_infere
     )  # (q, m): one held-out run
     expected = held_at(held.pressure_pa)[0] + estimate @ held_jac
     n_fit = split.n_fit_bins
-    both = _pointwise(jax.numpy.asarray(x), split.both)
+    both = pointwise(jax.numpy.asarray(x), split.both)
     scale = np.max(np.abs(estimate @ held_jac))
     np.testing.assert_allclose(np.asarray(both.predicted)[n_fit:], expected, rtol=0, atol=1e-3 * scale)
     assert scale > 0.3 * np.min(np.asarray(split.held_out.sd[0]))  # the correction is not negligible here
     moved = replace(split, held_out=replace(split.held_out, groups=(replace(held, observed=held.observed + 1e-3),)))
     for data in (split.both, moved.both):
-        np.testing.assert_allclose(np.asarray(_pointwise(jax.numpy.asarray(x), data).input_error), estimate, rtol=1e-4)
+        np.testing.assert_allclose(np.asarray(pointwise(jax.numpy.asarray(x), data).input_error), estimate, rtol=1e-4)
     # Alone, nothing informs the held-out runs' estimate: they are predicted at the fitted input.
-    alone = _pointwise(jax.numpy.asarray(x), split.held_out)
+    alone = pointwise(jax.numpy.asarray(x), split.held_out)
     np.testing.assert_allclose(np.asarray(alone.input_error), 0.0, atol=0)
 
 

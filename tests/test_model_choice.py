@@ -3,21 +3,23 @@ in summary.json and index.md, and the resumed fit that reads the discovery repor
 
 import json
 
+import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
 from peano_bayes.discovery.choice import choice_from_report, configured_model
-from peano_bayes.effects import LIBRARY, PHYSICS_EFFECTS, adopt, effects_in
+from peano_bayes.effects import LIBRARY, adopt, effects_in, physics_effects
+from peano_bayes.inference.fit import FitResult
 from peano_bayes.physics.model import PARAMETERS, ModelConfig
 
 #: A model with no element a library effect can switch on (the flow law is always present).
 BARE = ModelConfig(bending=False, tensile=False, extension=False, friction="none")
-WITH_ELEMENT = [n for n in PHYSICS_EFFECTS if LIBRARY[n].model]
+WITH_ELEMENT = [n for n in physics_effects() if LIBRARY[n].model]
 
 
 def test_only_effects_without_an_inference_element_have_no_model_fields():
-    assert set(PHYSICS_EFFECTS) - set(WITH_ELEMENT) == {"cyclic_softening"}
+    assert set(physics_effects()) - set(WITH_ELEMENT) == {"cyclic_softening"}
     for name, effect in LIBRARY.items():
         if effect.kind != "physics":
             assert not effect.model, name
@@ -174,11 +176,15 @@ def test_discovery_starts_from_the_fits_least_squares_which_also_serves_the_samp
 
     def least_squares(posterior, prior, **kw):
         fits.append(posterior.config)
-        return {"params": {"bending_k1_n": 40.0 + len(fits)}, "seconds": 1.0, "n_starts": 4, "n_failed": 0}
+        return FitResult(
+            names=("bending_k1_n",), u=np.zeros(1), params={"bending_k1_n": 40.0 + len(fits)}, covariance=np.eye(1),
+            cost=1.0, n_starts=4, n_failed=0, n_step_limit=0, start_costs=np.ones(4), noise={}, noise_estimate={},
+            seconds=1.0,
+        )  # fmt: skip
 
     def choose_model(dataset, config, out_dir, *, start, **kw):
         starts.append(start)
-        extra = next(e for e in PHYSICS_EFFECTS if LIBRARY[e].model and e not in effects_in(config))
+        extra = next(e for e in physics_effects() if LIBRARY[e].model and e not in effects_in(config))
         report = {"verdict": "named" if adopts else "none", "named": [extra] if adopts else []}
         return choice_from_report(config, report, out_dir)
 

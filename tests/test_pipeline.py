@@ -10,7 +10,7 @@ import pytest
 
 from peano_bayes.app.batch import RunLog
 from peano_bayes.errors import PeanoBayesInputError
-from peano_bayes.inference.driver import _linearisation_point
+from peano_bayes.inference.driver import linearisation_point
 from peano_bayes.report.index import index_markdown
 
 
@@ -138,17 +138,17 @@ def test_a_resumed_state_needs_the_point_its_input_error_was_linearised_at(tmp_p
     posterior = SimpleNamespace(names=("a", "b"))
     path, state = tmp_path / "input_error_point.json", tmp_path / "sampler_state.npz"
     with pytest.raises(PeanoBayesInputError, match="earlier version.*without --resume"):
-        _linearisation_point(path, state, posterior)
+        linearisation_point(path, state, posterior)
     path.write_text(json.dumps({"names": ["a", "c"], "theta": [1.0, 2.0]}))
     with pytest.raises(PeanoBayesInputError, match="linearised over the parameters a, c; this fit samples a, b"):
-        _linearisation_point(path, state, posterior)
+        linearisation_point(path, state, posterior)
     path.write_text(json.dumps({"names": ["a", "b"], "theta": [1.0, 0.1 + 0.2]}))  # written before AR(1) residuals
-    theta, lag1, noncentred = _linearisation_point(path, state, posterior)
+    theta, lag1, noncentred = linearisation_point(path, state, posterior)
     np.testing.assert_array_equal(theta, [1.0, 0.1 + 0.2])
     assert lag1 == {} and noncentred == ()
     path.write_text(json.dumps({"names": ["a", "b"], "theta": [1.0, 2.0], "residual_lag1": {"blocking": 0.97},
                                 "noncentred": [True, False]}))  # fmt: skip
-    assert _linearisation_point(path, state, posterior)[1:] == ({"blocking": 0.97}, (True, False))
+    assert linearisation_point(path, state, posterior)[1:] == ({"blocking": 0.97}, (True, False))
 
 
 def test_a_main_job_unit_reports_its_material_in_the_worker(tmp_path, monkeypatch):

@@ -14,16 +14,16 @@ pytestmark = pytest.mark.xdist_group("recovered")
 def test_multistart_fit_recovers_the_generating_parameters(recovered):
     _, _, _, truth, fitted = recovered
     # 8 starts asked, solved in batches of 4: the second batch runs only if the first's best starts disagree
-    assert fitted["n_starts"] in (4, 8) and 0 <= fitted["n_failed"] < fitted["n_starts"]
-    assert len(fitted["start_costs"]) == fitted["n_starts"]
-    assert np.isfinite(fitted["start_costs"]).sum() == fitted["n_starts"] - fitted["n_failed"]
-    cov = np.asarray(fitted["covariance"])
-    for i, name in enumerate(fitted["names"]):
+    assert fitted.n_starts in (4, 8) and 0 <= fitted.n_failed < fitted.n_starts
+    assert len(fitted.start_costs) == fitted.n_starts
+    assert np.isfinite(fitted.start_costs).sum() == fitted.n_starts - fitted.n_failed
+    cov = np.asarray(fitted.covariance)
+    for i, name in enumerate(fitted.names):
         sd = np.sqrt(cov[i, i])
         # Within 4 Laplace standard deviations (in log units) and within 10 % of the truth.
-        assert abs(np.log(fitted["params"][name] / truth[name])) < max(4 * sd, 1e-3), (name, fitted["params"][name])
-        assert fitted["params"][name] == pytest.approx(truth[name], rel=0.1), name
-    assert fitted["quality"]["load_cycle"]["r2"] > 0.99
+        assert abs(np.log(fitted.params[name] / truth[name])) < max(4 * sd, 1e-3), (name, fitted.params[name])
+        assert fitted.params[name] == pytest.approx(truth[name], rel=0.1), name
+    assert fitted.quality["load_cycle"]["r2"] > 0.99
 
 
 @pytest.mark.slow
@@ -34,7 +34,7 @@ def test_least_squares_continues_in_rounds_until_the_best_start_converges(recove
     from peano_bayes.inference.prior_files import prior_for
 
     posterior, _, _, _, fitted = recovered
-    names = list(fitted["names"])
+    names = list(fitted.names)
     prior = prior_for("TP").select(names)
     kwargs = dict(config=posterior.config, n_starts=2, seed=0, fixed=posterior.fixed, max_steps=10)
     short = fit(posterior.observations, prior, max_rounds=1, **kwargs)
@@ -43,11 +43,11 @@ def test_least_squares_continues_in_rounds_until_the_best_start_converges(recove
     assert rounds.converged and 1 < rounds.rounds < 30
     assert np.isfinite(rounds.start_costs).sum() == rounds.n_starts - rounds.n_failed
     assert 0 <= rounds.n_step_limit <= rounds.n_starts - rounds.n_failed - 1  # the best start finished
-    assert fitted["converged"]
-    sd = np.sqrt(np.diag(np.asarray(fitted["covariance"])))
-    shift = [abs(np.log(rounds.params[n] / fitted["params"][n])) for n in names]
+    assert fitted.converged
+    sd = np.sqrt(np.diag(np.asarray(fitted.covariance)))
+    shift = [abs(np.log(rounds.params[n] / fitted.params[n])) for n in names]
     assert np.all(np.asarray(shift) < np.maximum(1e-2 * sd, 1e-5)), dict(zip(names, shift, strict=True))
-    assert rounds.cost == pytest.approx(fitted["cost"], rel=1e-6)
+    assert rounds.cost == pytest.approx(fitted.cost, rel=1e-6)
     with pytest.raises(ValueError, match="max_rounds"):
         fit(posterior.observations, prior, max_rounds=0, **kwargs)
 
@@ -57,7 +57,7 @@ def test_fit_residuals_match_the_sensor_noise(recovered):
     """With the driving inputs denoised (likelihood.prepare), the residuals are sensor noise; with the raw
     noisy inputs they were 0.46 N per sample against 0.2 N."""
     _, _, _, truth, fitted = recovered
-    assert fitted["noise_estimate"]["noise_load_cycle_force_n"] == pytest.approx(0.2, rel=0.15)
+    assert fitted.noise_estimate["noise_load_cycle_force_n"] == pytest.approx(0.2, rel=0.15)
 
 
 @pytest.mark.slow

@@ -13,7 +13,7 @@ from ..physics.model import GRAVITY_M_PER_S2
 PA_PER_MPA = 1e6
 
 
-def _branches(strain, force_n):
+def loop_branches(strain, force_n):
     """Split a load cycle at its most stretched sample: (stretching branch, relaxing branch)."""
     strain, force_n = np.asarray(strain, float), np.asarray(force_n, float)
     turn = int(np.argmin(strain))
@@ -31,7 +31,7 @@ def hysteresis_loss(strain, force_n) -> float:
 
     Areas are taken over the strain range both branches cover.
     """
-    (s_up, f_up), (s_down, f_down) = _branches(strain, force_n)
+    (s_up, f_up), (s_down, f_down) = loop_branches(strain, force_n)
     lo = max(s_up.min(), s_down.min())
     hi = min(s_up.max(), s_down.max())
     grid = np.linspace(lo, hi, 256)
@@ -56,7 +56,7 @@ def extrapolated_free_strain(strain, force_n, fit_fraction: float = 0.2) -> floa
     still bends there, so on the bundled muscles this reads 0.02-0.08 below the muscle's own free strain
     (:func:`peano_bayes.physics.free_strain`, what the metrics report as ``free_strain``).
     """
-    _, (s_down, f_down) = _branches(strain, force_n)
+    _, (s_down, f_down) = loop_branches(strain, force_n)
     if np.any(f_down <= 0):
         s, f = _sorted(s_down, f_down)
         return float(np.interp(0.0, f[::-1], s[::-1]))
@@ -72,7 +72,7 @@ def energy_per_pressure(strain, force_n, pressure_pa, flat_length_m, from_strain
     Integrates the relaxing curve from ``from_strain`` (default 0, the unstretched length; ``None``: the
     cycle's most stretched point) to its end, then the linear extrapolation to the free strain.
     """
-    _, (s_down, f_down) = _branches(strain, force_n)
+    _, (s_down, f_down) = loop_branches(strain, force_n)
     s, f = _sorted(s_down, f_down)
     eps_free = extrapolated_free_strain(strain, force_n)
     start = s.min() if from_strain is None else from_strain
@@ -87,7 +87,7 @@ def energy_per_pressure(strain, force_n, pressure_pa, flat_length_m, from_strain
 
 def stiffness_n_per_m(strain, force_n, flat_length_m, at_strain: float = -0.015) -> float:
     """Tangent stiffness dF/dy of the stretching branch at ``at_strain`` [N/m] (paper: -1.5 % at 0 kPa)."""
-    (s_up, f_up), _ = _branches(strain, force_n)
+    (s_up, f_up), _ = loop_branches(strain, force_n)
     s, f = _sorted(s_up, f_up)
     slope = np.gradient(f, s)
     return float(-np.interp(at_strain, s, slope) / flat_length_m)

@@ -36,15 +36,14 @@ from ..errors import PeanoBayesInputError
 from ..inference.coordinates import choose_noncentred, sampler_coordinates
 from ..inference.driver import (
     _first_call_seconds,
-    _linearisation_point,
     _log_lags,
     least_squares,
-    least_squares_outcome,
+    linearisation_point,
     optimum_centres,
     posterior_at_mode,
     walker_start,
 )
-from ..inference.fit import fit_quality, predictions, residual_correlation, sensor_noise
+from ..inference.fit import FitResult, fit_quality, predictions, residual_correlation, sensor_noise
 from ..inference.posterior import DEFAULT_HELD, SPECIMEN_SD, Posterior, build_posterior
 from ..inference.prior_files import load_prior
 from ..inference.priors import Prior
@@ -261,23 +260,23 @@ def infer(
     linearised_path = out / "input_error_point.json"
     fitted = None
     if resume and fit_path.exists():
-        fitted = json.loads(fit_path.read_text())
-        timings["least_squares_s"] = fitted["seconds"]
+        fitted = FitResult.from_json(json.loads(fit_path.read_text()), where=str(fit_path))
+        timings["least_squares_s"] = fitted.seconds
         log(f"{code}: least squares loaded from {fit_path}")
     else:
         for stale in (fit_path, state_path, linearised_path):
             stale.unlink(missing_ok=True)
 
-    def fit_plan(plan: PosteriorPlan) -> dict:
+    def fit_plan(plan: PosteriorPlan) -> FitResult:
         log(f"{code}: least squares from up to {n_starts} starts ...")
         fitted = least_squares(plan.posterior, plan.prior, n_starts=n_starts, seed=seed)
-        timings["least_squares_s"] = timings.get("least_squares_s", 0.0) + fitted["seconds"]
-        log(f"{code}: least squares done in {fitted['seconds']:.1f} s ({least_squares_outcome(fitted)})")
+        timings["least_squares_s"] = timings.get("least_squares_s", 0.0) + fitted.seconds
+        log(f"{code}: least squares done in {fitted.seconds:.1f} s ({fitted.outcome()})")
         return fitted
 
     if choice is None:  # discovery starts from the configured model's least squares: one fit serves both
         fitted = fit_plan(plan)
-        choice = _discover(dataset, whole_prior.config, out, seed=seed, log=log, start=fitted["params"])
+        choice = _discover(dataset, whole_prior.config, out, seed=seed, log=log, start=fitted.params)
         if choice.adopted:  # a larger model: its own least squares
             plan = _plan_posterior(dataset, whole_prior, choice.config, sample_all=sample_all, n_walkers=n_walkers)
             fitted = None
@@ -296,7 +295,7 @@ def infer(
     if fitted is None:
         fitted = fit_plan(plan)
     if not (resume and fit_path.exists()):
-        write_text(fit_path, json.dumps(fitted, indent=1))
+        write_text(fit_path, json.dumps(fitted.to_json(), indent=1))
 
     centre, covariance = walker_start(posterior, fitted)
     # Every batch in calls of half an ensemble (what emcee's red-blue moves evaluate): one compilation, which
@@ -306,7 +305,7 @@ def infer(
     start = None
     if resume and state_path.exists():  # a resumed run restores its walkers and needs no start
         # It reads back where its inputs' error was linearised and its AR(1) lags, so it samples the same posterior.
-        point, lag1, noncentred = _linearisation_point(linearised_path, state_path, posterior)
+        point, lag1, noncentred = linearisation_point(linearised_path, state_path, posterior)
         posterior = posterior.with_input_error_at(point).with_residual_lag1(lag1)
         _log_lags(posterior, lag1, lambda m: log(f"{code}: {m}"))
         timings["compile_s"] = _first_call_seconds(posterior, centre)
@@ -428,11 +427,12 @@ def infer(
         "ridges": posterior_ridges(idata, posterior.prior.names),
         "units": posterior.units,
         "fixed": posterior.fixed,
-        "fit_quality_least_squares": fitted["quality"],
+        "fit_quality_least_squares": fitted.quality,
         "fit_quality_posterior_mean": quality,
         "residual_correlation": correlation,
         "least_squares": {
-            k: fitted.get(k) for k in ("cost", "n_starts", "n_failed", "n_step_limit", "converged", "rounds", "params")
+            k: getattr(fitted, k)
+            for k in ("cost", "n_starts", "n_failed", "n_step_limit", "converged", "rounds", "params")
         },
         "posterior_mode": None
         if start is None

@@ -8,7 +8,7 @@ on data with hidden effects.
 """
 
 from .. import jax_config  # noqa: F401  (float64 before any JAX array is made; see peano_bayes.jax_config)
-from ..effects import CONFUSABLE, LIBRARY, NOISE_EFFECTS, PHYSICS_EFFECTS, Effect
+from ..effects import CONFUSABLE, LIBRARY, Effect, noise_effects, physics_effects
 from .data import SplitData, discovery_data
 from .model import DEFAULT_BASE, SUPERSET_CONFIG
 from .report import report_markdown, write_report
@@ -21,8 +21,8 @@ __all__ = [
     "Effect",
     "Gates",
     "LIBRARY",
-    "NOISE_EFFECTS",
-    "PHYSICS_EFFECTS",
+    "noise_effects",
+    "physics_effects",
     "SUPERSET_CONFIG",
     "SplitData",
     "discover",

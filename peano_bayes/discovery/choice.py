@@ -20,7 +20,7 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..effects import LIBRARY, PHYSICS_EFFECTS, adopt, effects_in
+from ..effects import LIBRARY, adopt, effects_in, physics_effects
 from ..physics.model import ModelConfig
 
 
@@ -81,7 +81,7 @@ def configured_model(config: ModelConfig) -> ModelChoice:
 
 def choice_from_report(config: ModelConfig, report: dict, report_dir: str | Path | None) -> ModelChoice:
     """The :class:`ModelChoice` that adopts the physics effects a discovery ``report`` named into ``config``."""
-    named = tuple(n for n in report.get("named", ()) if n in PHYSICS_EFFECTS)
+    named = tuple(n for n in report.get("named", ()) if n in physics_effects())
     configured = effects_in(config)
     chosen = adopt(config, named)
     return ModelChoice(

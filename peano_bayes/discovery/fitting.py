@@ -38,7 +38,11 @@ BATCH = 4
 _SOLVER = optx.LevenbergMarquardt(rtol=1e-6, atol=1e-6)
 
 
-def _objective(u, data: DiscoveryData, mask, pinned, centre):
+def discovery_residuals(u, data: DiscoveryData, mask, pinned, centre):
+    """The Levenberg-Marquardt residual vector of one superset point ``u`` (d,) with free entries ``mask`` (d,)
+    and the rest ``pinned``: every flat bin's whitened residual, the input-error estimates, a penalty for noise
+    scales above the base's, and a ridge of sd :data:`RIDGE_SD` about ``centre`` on the free entries; and the
+    physics solver's worst equilibrium error."""
     flat = evaluate_flat(values(u, mask, pinned), data)
     log_sd = flat.log_sd
     base_log_sd = jnp.concatenate(
@@ -85,18 +89,18 @@ def _residuals(width: int):
     """The objective's residual vector with its Jacobian materialized in ``width`` forward tangents (all of
     ``NAMES`` at the full width)."""
     basis = None if width >= len(NAMES) else (lambda u, args: free_basis(args[1], width))
-    return dense_jacobian(lambda u, args: _objective(u, *args)[0], basis=basis)
+    return dense_jacobian(lambda u, args: discovery_residuals(u, *args)[0], basis=basis)
 
 
 @functools.partial(jax.jit, static_argnames="width")
-def _solve(starts, masks, pinned, data: DiscoveryData, width: int = len(NAMES)):
+def solve_batch(starts, masks, pinned, data: DiscoveryData, width: int = len(NAMES)):
     """Levenberg-Marquardt from each ``starts`` row (m, d) with its mask and pinned values; ``width`` at least
     every mask's number of free parameters (:func:`jacobian_width`)."""
     objective = _residuals(width)
 
     def one(u0, mask, pin):
         sol = optx.least_squares(objective, _SOLVER, u0, (data, mask, pin, u0), max_steps=MAX_STEPS, throw=False)
-        residuals, solver_error = _objective(sol.value, data, mask, pin, u0)
+        residuals, solver_error = discovery_residuals(sol.value, data, mask, pin, u0)
         cost = 0.5 * jnp.sum(residuals**2)
         ok = jnp.isfinite(cost) & (solver_error <= 1.0)
         return sol.value, jnp.where(ok, cost, jnp.inf), sol.result == optx.RESULTS.successful
@@ -105,17 +109,18 @@ def _solve(starts, masks, pinned, data: DiscoveryData, width: int = len(NAMES)):
 
 
 @jax.jit
-def _jacobian(u, mask, pinned, data: DiscoveryData):
+def jacobian_of(u, mask, pinned, data: DiscoveryData):
     """Jacobian of the objective's residual vector at ``u``, and that vector."""
 
     def residuals(v):
-        res = _objective(v, data, mask, pinned, u)[0]
+        res = discovery_residuals(v, data, mask, pinned, u)[0]
         return res, res
 
     return jax.jacfwd(residuals, has_aux=True)(u)
 
 
-_pointwise = jax.jit(evaluate_flat)
+#: :func:`evaluate_flat` compiled: a superset point's flat residuals, predictions and noise scales on one data set.
+pointwise = jax.jit(evaluate_flat)
 
 
 @dataclass(frozen=True, eq=False)
@@ -148,7 +153,7 @@ class ModelFit:
 
 
 def _laplace(u, spec: ModelSpec, data: DiscoveryData) -> tuple[dict, np.ndarray]:
-    jac = np.asarray(_jacobian(jnp.asarray(u), jnp.asarray(spec.mask), jnp.asarray(spec.pinned), data)[0])
+    jac = np.asarray(jacobian_of(jnp.asarray(u), jnp.asarray(spec.mask), jnp.asarray(spec.pinned), data)[0])
     free = np.flatnonzero(spec.mask)
     j = jac[:, free]
     cov_u = np.linalg.pinv(j.T @ j)
@@ -171,7 +176,7 @@ def fit_models(specs, starts, data: DiscoveryData) -> list[ModelFit | None]:
     pinned = np.stack([s.pinned for s in specs])
     # Batch by batch: a (BATCH, d) shape every call, where one call on all n would compile once per distinct n.
     solved = [
-        _solve(
+        solve_batch(
             *(jnp.asarray(a[i : i + BATCH]) for a in (u0, masks, pinned)),
             data,
             width=jacobian_width(masks[i : i + BATCH]),
@@ -218,7 +223,7 @@ def gauss_newton_gain(spec: ModelSpec, start, data: DiscoveryData, current_cost:
     promises: ``current_cost - (|r|^2 - |P r|^2)`` with ``r`` the residuals at ``start`` and ``P`` the projection
     onto the span of the free parameters' Jacobian columns (a score statistic, used to rank candidates)."""
     u = to_unconstrained(start)
-    jac, res = _jacobian(jnp.asarray(u), jnp.asarray(spec.mask), jnp.asarray(spec.pinned), data)
+    jac, res = jacobian_of(jnp.asarray(u), jnp.asarray(spec.mask), jnp.asarray(spec.pinned), data)
     n = _n_data_residuals(data)
     jac, r = np.asarray(jac), np.asarray(res)[:n]
     j = jac[: r.size, spec.mask]
@@ -230,11 +235,24 @@ def gauss_newton_gain(spec: ModelSpec, start, data: DiscoveryData, current_cost:
 
 def evaluate(fit: ModelFit, split) -> tuple[Evaluation, Evaluation]:
     """Evaluate ``fit`` on the fitted and on the held-out runs of a :class:`~.data.SplitData`."""
-    flat = _pointwise(jnp.asarray(fit.x), split.both)
+    flat = pointwise(jnp.asarray(fit.x), split.both)
     loglik, r, predicted, error = (np.asarray(a) for a in (flat.loglik, flat.r, flat.predicted, flat.error))
     n, ok, a = split.n_fit_bins, bool(flat.solver_error <= 1.0), np.asarray(flat.input_error)
     part = lambda s: Evaluation(loglik[s], r[s], predicted[s], error[s], ok, a)  # noqa: E731
     return part(slice(None, n)), part(slice(n, None))
 
 
-__all__ = ["BATCH", "Evaluation", "MAX_STEPS", "gauss_newton_gain", "ModelFit", "RIDGE_SD", "evaluate", "fit_models"]
+__all__ = [
+    "BATCH",
+    "Evaluation",
+    "MAX_STEPS",
+    "ModelFit",
+    "RIDGE_SD",
+    "discovery_residuals",
+    "evaluate",
+    "fit_models",
+    "gauss_newton_gain",
+    "jacobian_of",
+    "pointwise",
+    "solve_batch",
+]

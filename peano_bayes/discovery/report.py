@@ -10,7 +10,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from ..atomic import write_text
-from ..effects import ABSORBS, CONFUSABLE, FLEXIBLE_TERMS, LIBRARY
+from ..effects import ABSORBS, CONFUSABLE, LIBRARY, flexible_terms
 from ..formatting import format_number
 from ..inference.fit import NOISE_CONSISTENCY_SE
 from ..report import plots
@@ -135,8 +135,8 @@ def report_markdown(report: dict) -> str:
     lines = [f"# Discovery report: specimen {report['specimen']}", ""]
     verdict = report["verdict"]
     # what the final model needed without naming it: the session baseline, or physics without its own evidence
-    described_baseline = [d for d in report["described"] if d in FLEXIBLE_TERMS]
-    described_physics = [d for d in report["described"] if d not in FLEXIBLE_TERMS]
+    described_baseline = [d for d in report["described"] if d in flexible_terms()]
+    described_physics = [d for d in report["described"] if d not in flexible_terms()]
     if verdict == "named":
         lines.append(f"**Verdict: the data show {', '.join(report['named'])}**, which the base model lacked.")
     elif verdict == "ambiguous":

@@ -76,7 +76,7 @@ from dataclasses import asdict, dataclass, fields, replace
 import numpy as np
 from scipy import stats
 
-from ..effects import CONFUSABLE, FLEXIBLE_TERMS, LIBRARY, WIDENING_NOISE, check_effects
+from ..effects import CONFUSABLE, LIBRARY, WIDENING_NOISE, check_effects, flexible_terms
 from ..inference.fit import lag1_effective_size, noise_excess
 from ..physics import PARAMETERS
 from .data import Covariates, SplitData
@@ -370,7 +370,9 @@ def _score(
     return _Candidate(name, fit, fit_eval, held_eval, evidence, all(checks.values()))
 
 
-def _start(current: ModelFit, name: str) -> np.ndarray:
+def effect_start(current: ModelFit, name: str) -> np.ndarray:
+    """The superset point (d,) the screen starts effect ``name`` from: ``current``'s, with the effect's own
+    parameters at its registered start values."""
     x = current.x.copy()
     for p, v in LIBRARY[name].start.items():
         x[NAMES.index(p)] = v
@@ -462,8 +464,8 @@ def refit_candidates(inactive, gain: dict, p_holm: dict, gates: Gates) -> tuple[
     by_signature = {k: [e for e in inactive if LIBRARY[e].signature == k] for k in significant}
     ranked = sorted(gain, key=lambda e: -gain[e])[: gates.screen]
     for k in significant:
-        ranked += [e for e in by_signature[k] if e not in ranked and e not in FLEXIBLE_TERMS]
-    ranked += [e for e in inactive if e in FLEXIBLE_TERMS]
+        ranked += [e for e in by_signature[k] if e not in ranked and e not in flexible_terms()]
+    ranked += [e for e in inactive if e in flexible_terms()]
     return ranked, by_signature
 
 
@@ -546,12 +548,12 @@ def discover(
         inactive = [e for e in LIBRARY if e not in current.spec.active]
         present = dict(zip(NAMES, current.x, strict=True))
         specs = {e: model_spec(current.spec.active + (e,), present) for e in inactive}
-        starts = {e: _start(current, e) for e in inactive}
+        starts = {e: effect_start(current, e) for e in inactive}
         cost = cur_fit.cost
         gain = {
             e: gauss_newton_gain(specs[e], starts[e], split.fit, cost)
             for e in inactive
-            if e not in SCREENED_BY_SIGNATURE and e not in FLEXIBLE_TERMS
+            if e not in SCREENED_BY_SIGNATURE and e not in flexible_terms()
         }
         ranked, by_signature = refit_candidates(inactive, gain, diag.p_holm, gates)
         say(
@@ -599,7 +601,7 @@ def discover(
                     joined_covariates(split.fit_covariates, split.held_out_covariates),
                     gates.alpha,
                 )
-                if best.name in FLEXIBLE_TERMS
+                if best.name in flexible_terms()
                 else None
             ),
             "gap_before": gap_table(cur_fit, cur_held, split),
@@ -666,6 +668,7 @@ __all__ = [
     "Gates",
     "VERDICTS",
     "discover",
+    "effect_start",
     "fit_base",
     "gap_table",
     "identified",

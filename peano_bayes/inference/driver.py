@@ -1,5 +1,6 @@
-"""The driver's stages from a posterior to the sampler's start: multi-start least squares (a JSON-ready record,
-``fit.json``), the walkers' centre and covariance, the posterior mode and the posterior the sampler explores.
+"""The driver's stages from a posterior to the sampler's start: multi-start least squares (a
+:class:`~peano_bayes.inference.fit.FitResult`, saved as ``fit.json``), the walkers' centre and covariance, the
+posterior mode and the posterior the sampler explores.
 :func:`peano_bayes.app.pipeline.infer` (``fit``, ``run``) and the validation studies run them in this order."""
 
 from __future__ import annotations
@@ -16,17 +17,17 @@ from ..defaults import (
     DEFAULT_STARTS,
 )
 from ..errors import PeanoBayesInputError
-from .fit import fit
+from .fit import FitResult, fit
 from .laplace import Laplace, NonCentred, posterior_mode, refine_mode
 from .posterior import CONTRAST_PREFIX, SPECIMEN_SD, Posterior
 
 
-def least_squares(posterior, prior, *, n_starts: int = DEFAULT_STARTS, seed: int = 0) -> dict:
+def least_squares(posterior, prior, *, n_starts: int = DEFAULT_STARTS, seed: int = 0) -> FitResult:
     """Multi-start least squares over the model parameters ``posterior`` samples (``prior``: the full prior
-    they come from), the rest held as in ``posterior``; a JSON-ready dict of the result."""
+    they come from), the rest held as in ``posterior``. ``fit.json`` holds its :meth:`FitResult.to_json`."""
     config = posterior.config
     model_names = [n for n in posterior.prior.names if n in config.parameter_names()]
-    result = fit(
+    return fit(
         posterior.observations,
         prior.select(model_names),
         config=config,
@@ -34,57 +35,21 @@ def least_squares(posterior, prior, *, n_starts: int = DEFAULT_STARTS, seed: int
         seed=seed,
         fixed=posterior.fixed,
     )
-    return {
-        "names": list(result.names),
-        "params": result.params,
-        "covariance": result.covariance.tolist(),
-        "noise_estimate": result.noise_estimate,
-        "cost": result.cost,
-        "n_starts": result.n_starts,
-        "n_failed": result.n_failed,
-        "n_step_limit": result.n_step_limit,
-        "converged": result.converged,
-        "status": None if result.status is None else result.status.value,
-        "rounds": result.rounds,
-        "optima": list(result.optima),
-        "start_costs": result.start_costs.tolist(),
-        "quality": result.quality,
-        "seconds": result.seconds,
-    }
 
 
-def least_squares_outcome(fitted: dict) -> str:
-    """One phrase on how the multi-start least squares of :func:`least_squares` ended (a ``fit.json`` written
-    before the rounds were recorded says nothing about the best start)."""
-    rounds = fitted.get("rounds", 1)
-    in_rounds = f"{rounds} round{'s' if rounds != 1 else ''}"
-    converged = fitted.get("converged")
-    best = (
-        ""
-        if converged is None
-        else f"best start converged in {in_rounds}; "
-        if converged
-        else f"best start NOT converged after {in_rounds}; "
-    )
-    return (
-        f"{best}of {fitted['n_starts']} starts {fitted['n_failed']} failed and {fitted.get('n_step_limit', 0)}"
-        " stopped unfinished"
-    )
-
-
-def walker_start(posterior, fitted: dict) -> tuple[np.ndarray, np.ndarray]:
+def walker_start(posterior, fitted: FitResult) -> tuple[np.ndarray, np.ndarray]:
     """Centre and covariance in theta for the walkers: the fit's point and Laplace covariance for the model
     parameters, the residual-based noise estimates, and the prior median of the pooling scale."""
     names = posterior.names
     centre = np.zeros(len(names))
     sd = np.full(len(names), 0.05)
     cov = np.diag(sd**2)
-    fit_names = list(fitted["names"])
-    fit_cov = np.asarray(fitted["covariance"])
+    fit_names = list(fitted.names)
+    fit_cov = np.asarray(fitted.covariance)
     idx = [names.index(n) for n in fit_names]
     prior_u = posterior.prior.sample(np.random.default_rng(0), 2000)
     prior_sd = np.std(prior_u, axis=0)
-    centre[: posterior.prior.ndim] = _theta_of(posterior, fitted, fitted["params"])
+    centre[: posterior.prior.ndim] = _theta_of(posterior, fitted, fitted.params)
     # The Laplace covariance, capped at the prior's spread in each direction.
     fsd = np.sqrt(np.clip(np.diag(fit_cov), 1e-12, None))
     cap = np.minimum(fsd, prior_sd[idx]) / fsd
@@ -97,21 +62,21 @@ def walker_start(posterior, fitted: dict) -> tuple[np.ndarray, np.ndarray]:
     return centre, cov
 
 
-def _theta_of(posterior, fitted: dict, params: dict) -> np.ndarray:
+def _theta_of(posterior, fitted: FitResult, params: dict) -> np.ndarray:
     """The prior's part of theta at the least-squares ``params`` (name -> SI), with the fit's noise estimates and
     the prior medians for what the fit does not set."""
-    point = {**posterior.prior.median(), **params, **fitted["noise_estimate"]}
+    point = {**posterior.prior.median(), **params, **fitted.noise_estimate}
     return np.asarray(posterior.prior.to_unconstrained(point))
 
 
-def optimum_centres(posterior, fitted: dict, centre: np.ndarray) -> np.ndarray:
-    """(k, D) theta of the other least-squares optima of ``fitted`` (``fit.json``'s ``optima``; none in a file
-    written before they were recorded), each as ``centre`` with the prior's part at that optimum: where the
-    sampler's ensembles start before it draws dispersed centres."""
+def optimum_centres(posterior, fitted: FitResult, centre: np.ndarray) -> np.ndarray:
+    """(k, D) theta of the other least-squares optima of ``fitted`` (:attr:`FitResult.optima`), each as
+    ``centre`` with the prior's part at that optimum: where the sampler's ensembles start before it draws
+    dispersed centres."""
     out = []
-    for params in fitted.get("optima", []):
+    for params in fitted.optima:
         theta = np.array(centre, dtype=float)
-        theta[: posterior.prior.ndim] = _theta_of(posterior, fitted, {**fitted["params"], **params})
+        theta[: posterior.prior.ndim] = _theta_of(posterior, fitted, {**fitted.params, **params})
         out.append(theta)
     return np.array(out).reshape(-1, len(centre))
 
@@ -186,7 +151,7 @@ def _log_lags(posterior, lag1: dict, log) -> None:
         )
 
 
-def _linearisation_point(path: Path, state_path: Path, posterior) -> tuple[np.ndarray, dict, tuple[bool, ...]]:
+def linearisation_point(path: Path, state_path: Path, posterior) -> tuple[np.ndarray, dict, tuple[bool, ...]]:
     """The point a resumed run linearised its inputs' error at, the AR(1) residual correlations it took there
     and which specimen contrasts it sampled non-centred (``input_error_point.json``; none in a file written
     before they existed); a sampler state without it, or with other parameters, was written by another
@@ -209,7 +174,7 @@ def _linearisation_point(path: Path, state_path: Path, posterior) -> tuple[np.nd
 __all__ = [
     "ModeStart",
     "least_squares",
-    "least_squares_outcome",
+    "linearisation_point",
     "optimum_centres",
     "posterior_at_mode",
     "walker_start",

@@ -20,6 +20,7 @@ import numpy as np
 import optimistix as optx
 
 from ..defaults import DEFAULT_STARTS
+from ..errors import PeanoBayesInputError
 from ..physics import ModelConfig
 from .denoise import noise_sd
 from .likelihood import SOLVER_TOLERANCE, bin_noise_sd, predict, whitened_residuals
@@ -118,8 +119,78 @@ class FitResult:
             return None
         return FitStatus.SUCCESSFUL if self.converged else FitStatus.STEP_LIMIT
 
+    def outcome(self) -> str:
+        """One phrase on how the multi-start least squares ended, for a log line."""
+        in_rounds = f"{self.rounds} round{'s' if self.rounds != 1 else ''}"
+        best = (
+            ""
+            if self.converged is None
+            else f"best start converged in {in_rounds}; "
+            if self.converged
+            else f"best start NOT converged after {in_rounds}; "
+        )
+        return f"{best}of {self.n_starts} starts {self.n_failed} failed and {self.n_step_limit} stopped unfinished"
 
-def _prior_spread(prior: Prior, seed: int) -> jnp.ndarray:
+    def to_json(self) -> dict:
+        """The JSON-ready record ``fit.json`` holds (arrays as lists; ``status`` the code of :attr:`status`);
+        :meth:`from_json` reads it back to an equal result."""
+        return {
+            "names": list(self.names),
+            "u": np.asarray(self.u).tolist(),
+            "params": dict(self.params),
+            "covariance": np.asarray(self.covariance).tolist(),
+            "noise": dict(self.noise),
+            "noise_estimate": dict(self.noise_estimate),
+            "cost": self.cost,
+            "n_starts": self.n_starts,
+            "n_failed": self.n_failed,
+            "n_step_limit": self.n_step_limit,
+            "converged": self.converged,
+            "status": None if self.status is None else self.status.value,
+            "rounds": self.rounds,
+            "optima": [dict(o) for o in self.optima],
+            "start_costs": np.asarray(self.start_costs).tolist(),
+            "quality": self.quality,
+            "seconds": self.seconds,
+        }
+
+    @classmethod
+    def from_json(cls, record: dict, *, where: str = "fit.json") -> FitResult:
+        """The result a :meth:`to_json` record describes; a record lacking a field this version needs is refused
+        naming ``where`` and the fields (it was written by an earlier version: fit again without resuming)."""
+        missing = [k for k in _RECORD_FIELDS if k not in record]
+        if missing:
+            raise PeanoBayesInputError(
+                f"{where}: no {', '.join(missing)}: written by an earlier version of peano-bayes; run again "
+                "without --resume"
+            )
+        return cls(
+            names=tuple(record["names"]),
+            u=np.asarray(record["u"], dtype=float),
+            params=dict(record["params"]),
+            covariance=np.asarray(record["covariance"], dtype=float),
+            cost=float(record["cost"]),
+            n_starts=int(record["n_starts"]),
+            n_failed=int(record["n_failed"]),
+            n_step_limit=int(record["n_step_limit"]),
+            start_costs=np.asarray(record["start_costs"], dtype=float),
+            noise=dict(record["noise"]),
+            noise_estimate=dict(record["noise_estimate"]),
+            quality=dict(record.get("quality", {})),
+            seconds=float(record.get("seconds", 0.0)),
+            converged=record.get("converged"),
+            rounds=int(record.get("rounds", 1)),
+            optima=tuple(dict(o) for o in record.get("optima", ())),
+        )
+
+
+#: The fields :meth:`FitResult.from_json` cannot do without.
+_RECORD_FIELDS = ("names", "u", "params", "covariance", "noise", "noise_estimate", "cost", "n_starts", "n_failed",
+                  "n_step_limit", "start_costs")  # fmt: skip
+
+
+def prior_spread(prior: Prior, seed: int) -> jnp.ndarray:
+    """(d,) standard deviation of 4000 prior draws in u (at least 1e-3): the scale of the fit's prior term."""
     draws = prior.sample(np.random.default_rng(seed), 4000)
     return jnp.asarray(np.maximum(np.std(draws, axis=0), 1e-3))
 
@@ -406,7 +477,7 @@ def fit(
     noise = {**DEFAULT_NOISE, **(noise or {})}
     fixed = {k: jnp.asarray(v) for k, v in {**config.nominal_parameters(), **(fixed or {})}.items()}
     fixed = {k: v for k, v in fixed.items() if k not in prior.names}
-    spread = _prior_spread(prior, seed)
+    spread = prior_spread(prior, seed)
     evaluate = _residuals_and_solver_ok(observations, prior, config, noise, spread, fixed)
     fn = dense_jacobian(lambda u, groups: evaluate(u, groups)[0])
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
@@ -502,6 +573,7 @@ __all__ = [
     "lag1_effective_size",
     "lag1_sums",
     "noise_excess",
+    "prior_spread",
     "predictions",
     "residual_correlation",
     "structured_tests",

@@ -140,7 +140,8 @@ def _in_theta(jac: np.ndarray, covariance_eta: np.ndarray) -> np.ndarray:
     return jac @ covariance_eta @ jac.T
 
 
-def _in_eta(jac: np.ndarray, covariance_theta: np.ndarray) -> np.ndarray:
+def covariance_in_eta(jac: np.ndarray, covariance_theta: np.ndarray) -> np.ndarray:
+    """A covariance in theta (D, D) carried to eta through ``jac`` = d theta / d eta (D, D) at the point."""
     inverse = np.linalg.inv(jac)
     return inverse @ covariance_theta @ inverse.T
 
@@ -205,13 +206,13 @@ def posterior_mode(
         return Laplace(start, cov, lp, steps, ModeStatus.BELOW_START, time.perf_counter() - t0, detail)
     jac = coords.jacobian(mode_eta)
     hessian = finite_difference_hessian(lambda x: objective(x)[1], mode_eta)
-    covariance = _laplace_covariance(hessian, _in_eta(jac, np.asarray(fallback_covariance)), max_sd)
+    covariance = capped_covariance(hessian, covariance_in_eta(jac, np.asarray(fallback_covariance)), max_sd)
     lp = _theta_log_prob(coords, mode_eta, lp_mode)
     cov = _in_theta(jac, covariance)
     return Laplace(coords.to_theta(mode_eta), cov, lp, steps, status, time.perf_counter() - t0, detail)
 
 
-def _laplace_covariance(hessian: np.ndarray, fallback_covariance: np.ndarray, max_sd: float) -> np.ndarray:
+def capped_covariance(hessian: np.ndarray, fallback_covariance: np.ndarray, max_sd: float) -> np.ndarray:
     """(D, D) inverse of the Hessian of -log posterior; a direction with no curvature (eigenvalue <= 1e-8) gets
     the fallback's variance along it, and no direction's standard deviation exceeds ``max_sd``."""
     hessian = np.array(hessian, dtype=float)
@@ -257,7 +258,7 @@ def refine_mode(
     coords = coordinates or _Same()
     d = start.mode.size
     eta0 = coords.to_eta(start.mode)
-    start_eta = _in_eta(coords.jacobian(eta0), start.covariance)
+    start_eta = covariance_in_eta(coords.jacobian(eta0), start.covariance)
     chol = np.linalg.cholesky(start_eta)
     to_eta = lambda u: eta0 + chol @ u  # noqa: E731
     eye = np.eye(d)
@@ -307,9 +308,17 @@ def refine_mode(
     for (i, j), (pp, pm, mp, mm) in zip(pairs, corners, strict=True):
         hessian_u[i, j] = hessian_u[j, i] = (pp - pm - mp + mm) / (4.0 * h * h)
     inverse = np.linalg.inv(chol)
-    covariance = _laplace_covariance(inverse.T @ hessian_u @ inverse, start_eta, max_sd)
+    covariance = capped_covariance(inverse.T @ hessian_u @ inverse, start_eta, max_sd)
     covariance = _in_theta(coords.jacobian(mode_eta), covariance)
     return Laplace(mode, covariance, lp, int(found.nit), status, time.perf_counter() - t0, detail)
 
 
-__all__ = ["Laplace", "NonCentred", "finite_difference_hessian", "posterior_mode", "refine_mode"]
+__all__ = [
+    "Laplace",
+    "NonCentred",
+    "capped_covariance",
+    "covariance_in_eta",
+    "finite_difference_hessian",
+    "posterior_mode",
+    "refine_mode",
+]

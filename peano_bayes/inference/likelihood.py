@@ -75,7 +75,7 @@ jax.tree_util.register_dataclass(
 )
 
 
-def _simulate(test: str, params, time_s, strain, pressure_pa, supply_pa, load_n, config, geometry):
+def simulate_test(test: str, params, time_s, strain, pressure_pa, supply_pa, load_n, config, geometry):
     """The observed signal of one run (m,) and the solver's equilibrium error."""
     kw = dict(config=config, geometry=geometry)
     if test == "load_cycle":
@@ -101,7 +101,7 @@ def _per_specimen(params):
     return model, offset
 
 
-def _predict_sets(params, group: RunGroup, strain, pressure_pa, config: ModelConfig, geometry: Geometry):
+def predict_sets(params, group: RunGroup, strain, pressure_pa, config: ModelConfig, geometry: Geometry):
     """Predicted bin means (u, m) of every simulated input row of ``group``, driven by ``strain`` and
     ``pressure_pa`` (u, p m), and each row's solver error (u,)."""
     model, offset = _per_specimen(params)
@@ -112,7 +112,7 @@ def _predict_sets(params, group: RunGroup, strain, pressure_pa, config: ModelCon
             p = {k: v * jnp.exp(offset[k][specimen]) if k in offset else v for k, v in p.items()}
         if config.mount:  # a known added mount in series with the specimen's own
             p["mount_compliance_m_per_n"] = p["mount_compliance_m_per_n"] + added
-        return _simulate(group.test, p, time_s, strain, pressure, supply, load, config, geometry)
+        return simulate_test(group.test, p, time_s, strain, pressure, supply, load, config, geometry)
 
     supply = group.supply_pa if group.supply_pa is not None else pressure_pa
     added = group.added_compliance_m_per_n
@@ -128,21 +128,21 @@ def _predict_sets(params, group: RunGroup, strain, pressure_pa, config: ModelCon
     return group.per_bin(predicted).mean(axis=-1), error
 
 
-#: :func:`_predict_sets` behind one stable ``jax.jit``: every program that contains a prediction (least
+#: :func:`predict_sets` behind one stable ``jax.jit``: every program that contains a prediction (least
 #: squares, its Jacobian, the mode search, the batched log posterior, the pointwise values and predictive
 #: draws) reuses its traced program, and differentiates or vectorizes that program instead of running the
 #: physics' Python again (tracing it costs seconds). The program is kept per configuration, geometry, run
 #: group structure (test, run keys) and the names, shapes and dtypes of the parameters.
-_traced_predict_sets = jax.jit(_predict_sets, static_argnums=(4, 5))
+_traced_predict_sets = jax.jit(predict_sets, static_argnums=(4, 5))
 
 
 def _sets_function(geometry: Geometry):
-    """:data:`_traced_predict_sets`, or :func:`_predict_sets` itself for a geometry that cannot be a static
+    """:data:`_traced_predict_sets`, or :func:`predict_sets` itself for a geometry that cannot be a static
     argument (array-valued fields are allowed, but not hashable)."""
     try:
         hash(geometry)
     except TypeError:
-        return _predict_sets
+        return predict_sets
     return _traced_predict_sets
 
 
@@ -447,6 +447,8 @@ __all__ = [
     "log_likelihood",
     "pointwise_log_likelihood",
     "predict",
+    "predict_sets",
+    "simulate_test",
     "whitened_residuals",
     "with_residual_lag1",
 ]

@@ -27,7 +27,7 @@ import numpy as np
 
 from ..data import Dataset
 from ..discovery.model import DEFAULT_BASE, NAMES, ModelSpec, model_spec
-from ..effects import CONFUSABLE, LIBRARY, OPEN_ORIFICE_M2, PHYSICS_EFFECTS, hideable
+from ..effects import CONFUSABLE, LIBRARY, OPEN_ORIFICE_M2, hideable, physics_effects
 from ..inference.reduce import OBSERVED, SPECIMEN_SCALED
 from ..physics import ModelConfig
 from ..rig import RigNoise, RigProtocol, RigSimulationError, simulate_dataset, simulate_veale_dataset
@@ -58,8 +58,14 @@ DRIFT_N_PER_S = 0.005
 
 #: Effects the benchmark can hide (:func:`~peano_bayes.effects.hideable`: each registry entry's ``hidden_at``
 #: gives its parameters at strength ``s``; the rig switches the element on where it is a quirk).
-HIDEABLE: tuple[str, ...] = tuple(hideable())
-NOT_HIDEABLE = tuple(e for e in PHYSICS_EFFECTS if e not in HIDEABLE)
+def hideable_names() -> tuple[str, ...]:
+    """The registered effects the benchmark hides one at a time (those with ``hidden_at``), in registry order."""
+    return tuple(hideable())
+
+
+def not_hideable() -> tuple[str, ...]:
+    """The registered physics effects the benchmark never hides: part of every base model."""
+    return tuple(e for e in physics_effects() if e not in hideable())
 
 
 @dataclass(frozen=True)
@@ -378,8 +384,8 @@ def failed_row(case: Case, seed: int, error: str) -> dict:
 
 __all__ = [
     "Case",
-    "HIDEABLE",
-    "NOT_HIDEABLE",
+    "hideable_names",
+    "not_hideable",
     "PROTOCOL",
     "TRUTH_CONFIG",
     "failed_row",
