@@ -91,7 +91,7 @@ def main() -> None:
             if not metrics_current(directory):
                 evaluate_result(directory, n_draws=args.draws, progress=False)
             metrics = read_metrics(directory)
-            draws[code] = {k: np.asarray(v, float) for k, v in metrics["draws"].items()}
+            draws[code] = {k: np.asarray(v, float) for k, v in metrics["draw_values"].items()}
             prior_only |= {k for k, v in metrics["summary"].items() if v.get("from_prior")}
         report = {}
         for criterion in CRITERIA:

@@ -196,7 +196,7 @@ def test_a_path_that_cannot_be_written_as_asked_is_bad_input_without_a_traceback
     for code in ("TP", "P"):
         (tmp_path / code).mkdir()
         draws = {c: [1.0, 2.0, 3.0] for c in CRITERIA}
-        (tmp_path / code / "metrics.json").write_text(json.dumps({"material": code, "draws": draws}))
+        (tmp_path / code / "metrics.json").write_text(json.dumps({"material": code, "draw_values": draws}))
     taken = tmp_path / "taken"
     taken.write_text("a file, not a folder")
     assert main(["rank", str(tmp_path / "TP"), str(tmp_path / "P"), "--out", str(taken)]) == 2

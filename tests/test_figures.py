@@ -13,7 +13,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 from peano_bayes.analysis.metrics import evaluate_result  # noqa: E402
-from peano_bayes.analysis.ranking import rank_materials  # noqa: E402
+from peano_bayes.analysis.ranking import CRITERIA, rank_materials  # noqa: E402
 from peano_bayes.inference.results import load_result  # noqa: E402
 from peano_bayes.report import plots  # noqa: E402
 from peano_bayes.report.figures import (  # noqa: E402
@@ -92,6 +92,13 @@ def test_predictive_band_of_a_result_holds_its_observed_bins(result_dir):
         assert inside.mean() >= 0.8, inside.mean()
         # the data scatter around the predictive median at about the noise (0.2 N per raw sample)
         assert np.sqrt(np.mean((r["observed"] - r["median"]) ** 2)) < 0.5
+    # A misfit of sd 5 N on the load cycles, far above the band's own width: the band becomes that normal's 94 %,
+    # 2 x 1.88 x 5 = 18.8 N wide, within the few percent its quantiles' sampling error allows; other tests are not
+    # touched (none fitted here).
+    for plain, wide in zip(runs, predictive_runs(load_result(result_dir), {"load_cycle": 5.0}), strict=True):
+        width = np.median(wide["high"] - wide["low"])
+        assert width == pytest.approx(np.hypot(18.8, np.median(plain["high"] - plain["low"])), rel=0.06), width
+        assert wide["discrepancy_sd"] == 5.0 and plain["discrepancy_sd"] is None and "misfit" in wide["title"]
 
 
 def test_ensemble_chains_pool_each_ensembles_walkers():
@@ -156,10 +163,17 @@ def test_material_and_cross_material_figures_are_written(result_dir, tmp_path):
 
     idata = load_result(result_dir)
     metrics = evaluate_result(result_dir, n_draws=8, progress=False)
-    # Two "materials" from one result: the cross-material plumbing needs no second fit.
+    assert metrics["draws"] == 8 and all(len(v) == 8 for v in metrics["draw_values"].values())
+    # Two "materials" from one result (the cross-material plumbing needs no second fit), with a known order: "P"
+    # is TP with every criterion twice as good in every draw, so P is clearly best by each and TP never is.
     results = {"TP": idata, "P": idata}
-    per_material = {"TP": metrics, "P": {**metrics, "material": "P"}}
-    ranking = rank_materials({c: m["draws"] for c, m in per_material.items()})
+    better = {c: np.asarray(metrics["draw_values"][c]) * 2.0 ** CRITERIA[c] for c in CRITERIA}
+    per_material = {"TP": metrics, "P": {**metrics, "material": "P", "draw_values": better}}
+    ranking = rank_materials({c: m["draw_values"] for c, m in per_material.items()})
+    assert ranking["criteria"] and ranking["materials"] == ["TP", "P"]
+    for criterion, r in ranking["criteria"].items():
+        assert (r["verdict"], r["materials"]) == ("clearly best", ["P"]), criterion
+        assert r["p_clearly_best"] == {"TP": 0.0, "P": 1.0} and r["rank_interval"] == {"TP": [2, 2], "P": [1, 1]}
     forest = forest_data(results)
     assert set(forest) == set(idata.posterior.data_vars) - {"noise_load_cycle_force_n"}
     for codes, median, low, high, unit in forest.values():

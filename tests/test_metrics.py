@@ -135,7 +135,7 @@ def test_metrics_command_writes_metrics_json(result_dir, capsys):
     captured = capsys.readouterr()
     report = json.loads(captured.out)  # stdout holds the JSON object alone
     written = json.loads((result_dir / "metrics.json").read_text())
-    assert report["material"] == written["material"] == "TP" and written["n_draws"] == 3
+    assert report["material"] == written["material"] == "TP" and written["draws"] == 3
     assert any(row["metric"] == "hysteresis_loss" for row in written["published"])
     assert "| metric | unit | median |" in captured.err  # the table a person reads, on stderr under --json
     assert "extrapolate" not in captured.err  # at its own test pressure
@@ -153,7 +153,8 @@ def test_metrics_at_a_common_pressure_go_to_their_own_file_and_follow_the_pressu
 
     own = evaluate_result(result_dir, n_draws=3, progress=False)
     assert own["test_pressure_kpa"] == own["own_test_pressure_kpa"] == 30.0 and own["published"]
-    assert np.all(np.asarray(at_60["draws"]["free_strain"]) > np.asarray(own["draws"]["free_strain"]))
+    assert at_60["draws"] == own["draws"] == 3
+    assert np.all(np.asarray(at_60["draw_values"]["free_strain"]) > np.asarray(own["draw_values"]["free_strain"]))
     assert main(["metrics", str(result_dir), "--pressure-kpa", "-5", "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert "--pressure-kpa must be a pressure in kPa above 0 and at most 1000" in err and "got -5" in err
@@ -298,8 +299,9 @@ def test_metrics_written_before_the_discrepancy_existed_are_not_current(tmp_path
     assert not metrics_current(tmp_path)  # none yet
     (tmp_path / "metrics.json").write_text(json.dumps({"material": "TP", "draws": {}}))
     assert not metrics_current(tmp_path)  # an older file: its intervals are the parameters' alone
-    for version, current in ((1, False), (METRICS_VERSION, True)):
-        (tmp_path / "metrics.json").write_text(json.dumps({"version": version, "material": "TP", "draws": {}}))
+    for version, current in ((1, False), (3, False), (METRICS_VERSION, True)):
+        record = {"version": version, "material": "TP", "draws": 0, "draw_values": {}}
+        (tmp_path / "metrics.json").write_text(json.dumps(record))
         assert metrics_current(tmp_path) == current
     assert not metrics_current(tmp_path, 60.0)  # the common pressure's file is apart
     (tmp_path / "metrics.json").write_text("{half")
@@ -334,5 +336,5 @@ def test_rank_recomputes_metrics_of_an_older_version_with_as_many_draws(result_d
     assert main(["rank", str(result), "--out", str(tmp_path / "ranking")]) == 0
     capsys.readouterr()
     written = json.loads((result / "metrics.json").read_text())
-    assert written["version"] == METRICS_VERSION and written["n_draws"] == 3
-    assert written["draws"]["free_strain"] != older["draws"]["free_strain"]
+    assert written["version"] == METRICS_VERSION and written["draws"] == 3
+    assert written["draw_values"]["free_strain"] != older["draws"]["free_strain"]

@@ -20,24 +20,27 @@ def test_probabilities_match_the_normal_theory(rng):
     r = rank_criterion(draws, "speed")
     assert r.p_better[1, 0] == pytest.approx(0.760, abs=0.02)
     assert r.p_better[0, 1] == pytest.approx(1 - 0.760, abs=0.02)
-    assert r.p_best.sum() == pytest.approx(1.0)
-    assert r.p_best[1] == pytest.approx(0.760, abs=0.02)
     assert r.mean_rank[1] == pytest.approx(1.24, abs=0.02)
+    # best = no other better by more than 5 %: A is, unless B - 1.05 A > 0, B ~ N(-0.05 + 0.1, 0.1 sqrt(2.1025))
+    # so P(A best) = 1 - Phi(0.05 / 0.145) = 0.365; B is best unless A - 1.05 B > 0: Phi(-0.155 / 0.145) = 0.142.
+    assert r.p_best[0] == pytest.approx(0.365, abs=0.02) and r.p_best[1] == pytest.approx(1 - 0.142, abs=0.02)
 
 
 def test_margin_probabilities_match_the_normal_theory(rng):
-    """A ~ N(1, 0.02), B ~ N(1.02, 0.02): B is best most of the time, yet almost never better by more than the
-    5 % margin, so neither is *clearly* best and both are *near* best. Closed forms: P(B - A > 0.05 |A|) with
-    B - 1.05 A ~ N(-0.03, 0.02 sqrt(1 + 1.05^2)) = Phi(-1.036) = 0.150."""
+    """A ~ N(1, 0.02), B ~ N(1.02, 0.02): B is larger most of the time, yet almost never by more than the
+    5 % margin, so neither is *clearly* best and both are *best* (within the margin). Closed forms:
+    P(B - A > 0.05 |A|) with B - 1.05 A ~ N(-0.03, 0.02 sqrt(1 + 1.05^2)) = Phi(-1.036) = 0.150."""
     draws = _draws(rng, {"A": 1.0, "B": 1.02}, sd=0.02, n=20_000)
     r = rank_criterion(draws, "speed")
-    assert r.p_best[1] == pytest.approx(0.760, abs=0.02)
+    assert r.p_better[1, 0] == pytest.approx(0.760, abs=0.02)
     assert r.p_better_by_margin[1, 0] == pytest.approx(0.150, abs=0.01)
     assert r.p_clearly_best[1] == pytest.approx(0.150, abs=0.01)
-    assert r.p_near_best[0] == pytest.approx(1 - 0.150, abs=0.01) and r.p_near_best[1] > 0.99
+    assert r.p_best[0] == pytest.approx(1 - 0.150, abs=0.01) and r.p_best[1] > 0.99
+    assert r.verdict() == {"verdict": "best", "materials": ["B"]}  # A's 0.85 is short of 0.9
     wide = _draws(rng, {"A": 1.0, "B": 1.5}, sd=0.02)
     r = rank_criterion(wide, "speed")
-    assert r.p_clearly_best[1] == 1.0 and r.p_near_best[0] == 0.0
+    assert r.p_clearly_best[1] == 1.0 and r.p_best[0] == 0.0
+    assert r.verdict() == {"verdict": "clearly best", "materials": ["B"]}
     # lower is better: hysteresis 1.0 beats 1.5 by far more than 5 %
     assert rank_criterion(wide, "hysteresis_loss").p_clearly_best[0] == 1.0
 
@@ -56,7 +59,8 @@ def test_identical_materials_share_first_place(rng):
     draws = _draws(rng, {"A": 1.0, "C": 0.5}, n=200)
     draws["B"] = {c: v.copy() for c, v in draws["A"].items()}
     r = rank_criterion(draws, "speed")
-    np.testing.assert_allclose(r.p_best, [0.5, 0.0, 0.5])
+    np.testing.assert_allclose(r.p_best, [1.0, 0.0, 1.0])  # best together: neither beats the other
+    assert r.verdict() == {"verdict": "best", "materials": ["A", "B"]}
     assert r.p_better[0, 2] == r.p_better[2, 0] == 0.0
     assert r.mean_rank[0] == r.mean_rank[2] == 1.0 and r.mean_rank[1] == 3.0
 
@@ -81,10 +85,11 @@ def test_orderings_use_only_the_materials_present(rng):
     checks = ordering_checks(draws)
     assert checks and all({c["a"], c["b"]} <= {"TP", "P"} for c in checks)
     speed = next(c for c in checks if c["metric"] == "speed")
-    assert (speed["a"], speed["b"], speed["probability"]) == ("TP", "P", 1.0)
+    assert (speed["a"], speed["b"], speed["probability"], speed["se"]) == ("TP", "P", 1.0, 0.0)
     equal = next(c for c in checks if c["relation"] == "=")  # hysteresis: TP about equal to P
     assert equal["probability"] == 0.0  # a factor of 2 apart
     assert speed["verdict"] == "agrees" and equal["verdict"] == "contradicts"
+    assert speed["margin"] == equal["margin"] == 0.05 and speed["n"] == 4000
 
 
 def test_draws_not_finite_everywhere_are_left_out(rng):
@@ -98,11 +103,12 @@ def test_draws_not_finite_everywhere_are_left_out(rng):
 def test_rank_command_writes_its_report_and_refuses_missing_metrics(tmp_path, rng, capsys):
     for code, mu in {"TP": 1.0, "P": 1.1}.items():
         (tmp_path / code).mkdir()
-        m = {"material": code, "draws": {c: rng.normal(mu, 0.1, 50).tolist() for c in CRITERIA}}
+        m = {"material": code, "draw_values": {c: rng.normal(mu, 0.1, 50).tolist() for c in CRITERIA}}
         (tmp_path / code / "metrics.json").write_text(json.dumps(m))
     assert main(["rank", str(tmp_path / "TP"), str(tmp_path / "P"), "--json"]) == 0
     report = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert report["materials"] == ["TP", "P"] and (tmp_path / "ranking.md").exists()
+    assert report["draws"] == 50 and report["margin"] == 0.05
     assert main(["rank", str(tmp_path / "TP"), "--out", str(tmp_path / "alone")]) == 0
     assert "one result: it is best in every criterion by definition" in capsys.readouterr().err
     (tmp_path / "X").mkdir()
@@ -135,8 +141,9 @@ def test_ranking_says_when_materials_were_tested_at_different_pressures(rng):
 def test_ordering_summary_counts_each_verdict_once(rng):
     from peano_bayes.analysis.ranking import ordering_counts, ordering_summary, ranking_markdown
 
-    # With 1 % spread: "a > b" agrees when a's mean is 30 % larger, contradicts when 30 % smaller and is
-    # undecided when the means are equal (TP and P); "about equal" agrees for equal means, else contradicts.
+    # With 1 % spread: "a > b" (by more than 5 %) agrees when a's mean is 30 % larger and contradicts when it is
+    # 30 % smaller or equal (TP and P: a is not larger by the margin); "about equal" (within 5 %) agrees for equal
+    # means, else contradicts.
     # The step metrics marked prior-only are not informed whatever their values say.
     means = {"TP": 1.5, "P": 1.5, "TFC": 1.0, "PR": 0.7}
     prior_only = ("speed", "power_per_pressure", "efficiency")
@@ -149,12 +156,12 @@ def test_ordering_summary_counts_each_verdict_once(rng):
         elif o["relation"] == "=":
             verdict = "agrees" if means[o["a"]] == means[o["b"]] else "contradicts"
         elif means[o["a"]] == means[o["b"]]:
-            verdict = "undecided"
+            verdict = "contradicts"
         else:
             verdict = "agrees" if means[o["a"]] > means[o["b"]] else "contradicts"
         assert o["verdict"] == verdict, o
         expected[verdict] += 1
-    assert all(expected.values()), expected
+    assert expected["agrees"] and expected["contradicts"] and expected["not informed"], expected
     assert ordering_counts(rows) == expected
     line = ordering_summary(rows)
     informed = len(rows) - expected["not informed"]
@@ -171,7 +178,7 @@ def test_rank_says_whose_metrics_rest_on_fewer_draws_than_were_drawn(tmp_path, r
         draws = {c: rng.normal(1.0, 0.1, 100).tolist() for c in CRITERIA}
         for values in draws.values():  # as metrics.json keeps them: NaN where a draw could not be simulated
             values[:failed] = [float("nan")] * failed
-        m = {"material": code, "n_draws": 100, "n_failed": failed, "draws": draws}
+        m = {"material": code, "draws": 100, "n_failed": failed, "draw_values": draws}
         (tmp_path / code / "metrics.json").write_text(json.dumps(m))
     assert main(["rank", str(tmp_path / "TP"), str(tmp_path / "P")]) == 0
     err = capsys.readouterr().err
@@ -179,3 +186,47 @@ def test_rank_says_whose_metrics_rest_on_fewer_draws_than_were_drawn(tmp_path, r
     page = (tmp_path / "ranking.md").read_text()
     assert "*Draws that could not be simulated* (TP: 68 of 100)" in page
     assert json.loads((tmp_path / "ranking.json").read_text())["failed_draws"] == {"TP": [68, 100]}
+
+
+def test_a_probability_carries_its_monte_carlo_error_and_a_verdict_needs_two_of_them():
+    """The binomial standard error sqrt(p (1 - p) / n); a claim at 0.9 holds only above 0.9 + 2 SE."""
+    from peano_bayes.analysis.ranking import mc_se, verdict
+
+    assert mc_se(0.9, 100) == pytest.approx(0.03) and mc_se(0.9, 1000) == pytest.approx(0.0094868, rel=1e-4)
+    assert mc_se(1.0, 50) == 0.0 and np.isnan(mc_se(0.5, 0))
+    assert verdict(0.93, mc_se(0.93, 100)) == "undecided"  # 0.93 - 2 x 0.0255 < 0.9
+    assert verdict(0.93, mc_se(0.93, 1000)) == "holds"  # 0.93 - 2 x 0.0081 > 0.9
+    assert verdict(0.07, mc_se(0.07, 1000)) == "fails" and verdict(0.07, mc_se(0.07, 100)) == "undecided"
+    assert verdict(0.05, 0.01, fails=False) == "undecided" and verdict(float("nan"), 0.0) == "undecided"
+
+
+def test_an_ordering_near_its_threshold_is_undecided_until_the_draws_settle_it():
+    """TP's speed exceeds P's by more than 5 % in exactly 92 of 100 paired draws: 0.92 is within two standard
+    errors (0.027 each) of 0.9, so undecided; the same share of 1000 draws agrees."""
+    for n, said in ((100, "undecided"), (1000, "agrees")):
+        tp = np.where(np.arange(n) < 0.92 * n, 2.0, 1.0)  # 2.0 beats P's 1.0 by 100 %, 1.0 ties it
+        row = next(o for o in ordering_checks({"TP": {"speed": tp}, "P": {"speed": np.ones(n)}}) if o["a"] == "TP")
+        assert row["probability"] == pytest.approx(0.92) and row["verdict"] == said, (n, row)
+    # the margin: 1.04 is not "greater" at 5 %, 1.06 is; 1.04 is "about equal", 1.06 is not
+    near = ordering_checks({"TP": {"speed": np.full(10, 1.04)}, "P": {"speed": np.ones(10)}})[0]
+    far = ordering_checks({"TP": {"speed": np.full(10, 1.06)}, "P": {"speed": np.ones(10)}})[0]
+    assert (near["probability"], far["probability"]) == (0.0, 1.0)
+    hyst = lambda a: {"TP": {"hysteresis_loss": np.full(10, a)}, "P": {"hysteresis_loss": np.ones(10)}}  # noqa: E731
+    equal = lambda a: next(o for o in ordering_checks(hyst(a)) if o["relation"] == "=")["probability"]  # noqa: E731
+    assert (equal(1.04), equal(1.06)) == (1.0, 0.0)
+
+
+def test_two_results_with_a_known_order_rank_that_way_in_the_report_page(rng):
+    """A is faster than B by 50 % in every draw: the page names A clearly best on speed, with P = 1.00 ± 0.00 and
+    rank 1.0 (1-1), and B last."""
+    from peano_bayes.analysis.ranking import ranking_markdown
+
+    report = rank_materials(_draws(rng, {"A": 1.5, "B": 1.0}, sd=0.01, n=1000))
+    speed = report["criteria"]["speed"]
+    assert speed["verdict"] == "clearly best" and speed["materials"] == ["A"]
+    assert speed["rank_interval"] == {"A": [1, 1], "B": [2, 2]}
+    row = next(line for line in ranking_markdown(report).splitlines() if line.startswith("| speed"))
+    assert "| clearly best: A |" in row and "1.00 ± 0.00 / 1.00 ± 0.00, rank 1.0 (1-1)" in row
+    assert "0.00 ± 0.00 / 0.00 ± 0.00, rank 2.0 (2-2)" in row
+    hysteresis = report["criteria"]["hysteresis_loss"]  # lower is better: B
+    assert hysteresis["materials"] == ["B"] and report["draws"] == 1000

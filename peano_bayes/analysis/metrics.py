@@ -42,6 +42,7 @@ import numpy as np
 from scipy.signal import savgol_filter
 
 from .. import bundled
+from ..defaults import DEFAULT_DRAWS
 from ..errors import PeanoBayesError, PeanoBayesInputError
 from ..formatting import format_number
 from ..inference.fit import structured_tests
@@ -58,7 +59,7 @@ from . import readouts as m
 #: discrepancy of misfit tests added, one normal per test, growing above the tested pressure; 3: ``free_strain``
 #: is the muscle's own, :func:`~peano_bayes.physics.free_strain`, and the paper's extrapolated reading is
 #: ``free_strain_paper_reading``).
-METRICS_VERSION = 3
+METRICS_VERSION = 4
 
 #: Savitzky-Golay window of the step-response smoothing [s] (order 3); 15 ms at 1 kHz is 15 samples.
 STEP_SMOOTHING_S = 0.015
@@ -430,7 +431,7 @@ def metrics_file(directory: str | Path, test_pressure_kpa: float | None = None) 
 def posterior_metrics(
     idata,
     *,
-    n_draws: int = 100,
+    n_draws: int = DEFAULT_DRAWS,
     seed: int = 0,
     progress: Callable | None = None,
     level: str = "new_specimen",
@@ -549,7 +550,7 @@ def metrics_markdown(material: str, summary: dict, comparison: list[dict]) -> st
 def evaluate_result(
     path: str | Path,
     *,
-    n_draws: int = 100,
+    n_draws: int = DEFAULT_DRAWS,
     seed: int = 0,
     hdi_prob: float = 0.94,
     progress: bool = True,
@@ -558,14 +559,15 @@ def evaluate_result(
     """Posterior metrics of one result (``posterior.nc`` or its directory), compared with the paper, written
     beside the result (atomically, :func:`metrics_file`); returns what it wrote: ``material``,
     ``test_pressure_kpa`` (the pressure its metrics are simulated at; ``None`` if unknown),
-    ``own_test_pressure_kpa`` (the material's), ``n_draws``, ``n_failed``, ``prior_only``, ``summary``
+    ``own_test_pressure_kpa`` (the material's), ``draws`` (posterior draws simulated), ``n_failed``,
+    ``prior_only``, ``summary``
     (:meth:`PosteriorMetrics.summary`), ``published`` (:func:`compare_published`, empty away from the own test
     pressure: the paper's values are at that pressure), ``discrepancy`` (test -> the misfit beyond the sensor
     noise [signal unit] that :func:`posterior_metrics` adds to the metrics read off it, as measured, before any
     growth above the tested pressure: :func:`misfit_discrepancy` of the ``summary.json`` beside the result;
     empty without one or where the model explains the data), ``version`` (:data:`METRICS_VERSION`) and
-    ``draws`` (metric -> list of predictive values, for :mod:`peano_bayes.analysis.ranking`). ``test_pressure_kpa``: a
-    common pressure [kPa] instead of the material's own."""
+    ``draw_values`` (metric -> list of predictive values, for :mod:`peano_bayes.analysis.ranking`).
+    ``test_pressure_kpa``: a common pressure [kPa] instead of the material's own."""
     from tqdm.auto import tqdm
 
     from ..atomic import write_text
@@ -597,14 +599,14 @@ def evaluate_result(
         "material": material,
         "test_pressure_kpa": own if common is None else common,
         "own_test_pressure_kpa": own,
-        "n_draws": n_draws,
+        "draws": n_draws,
         "n_failed": result.n_failed,
         "prior_only": list(result.prior_only),
         "hdi_prob": hdi_prob,
         "summary": summary,
         "published": compare_published(material, summary) if common in (None, own) else [],
         "discrepancy": discrepancy,
-        "draws": {name: [float(x) for x in values] for name, values in result.draws.items()},
+        "draw_values": {name: [float(x) for x in values] for name, values in result.draws.items()},
     }
     write_text(metrics_file(directory, common), json.dumps(out, indent=1, default=float))
     return out
@@ -652,10 +654,13 @@ def metrics_current(directory: str | Path, test_pressure_kpa: float | None = Non
     return _stored_metrics(directory, test_pressure_kpa).get("version") == METRICS_VERSION
 
 
-def previous_draws(directory: str | Path, test_pressure_kpa: float | None = None, default: int = 100) -> int:
+def previous_draws(
+    directory: str | Path, test_pressure_kpa: float | None = None, default: int = DEFAULT_DRAWS
+) -> int:
     """The number of draws an existing metrics file of ``directory`` was made with (to recompute it alike), or
     ``default`` without a readable one."""
-    n = _stored_metrics(directory, test_pressure_kpa).get("n_draws", default)
+    stored = _stored_metrics(directory, test_pressure_kpa)
+    n = stored.get("draws") if isinstance(stored.get("draws"), int) else stored.get("n_draws", default)
     return n if isinstance(n, int) and n >= 2 else default
 
 
@@ -667,6 +672,9 @@ def read_metrics(path: str | Path, test_pressure_kpa: float | None = None) -> di
     if not file.exists():
         raise PeanoBayesInputError(f"{file}: no such file; run 'peano-bayes metrics {path}' first")
     out = _read_json(file)
-    if "draws" not in out or "material" not in out:
-        raise PeanoBayesInputError(f"{file}: lacks 'material' or 'draws'; rerun 'peano-bayes metrics {path}'")
+    if "draw_values" not in out or "material" not in out:
+        raise PeanoBayesInputError(
+            f"{file}: lacks 'material' or 'draw_values' (written by an earlier version?); rerun "
+            f"'peano-bayes metrics {path}'"
+        )
     return out

@@ -6,6 +6,12 @@ draws of different materials are paired by index (any pairing of independent dra
 Per criterion: the probability each material is best, the pairwise matrix P(row better than column), the
 expected rank with a 94 % interval; over :data:`PARETO_CRITERIA` jointly, the probability each material is
 Pareto-optimal; and the paper's stated orderings (:data:`PUBLISHED_ORDERINGS`) as probabilities.
+
+One practical-equivalence margin (:data:`PRACTICAL_MARGIN`) defines *best*, *clearly best* and the orderings'
+``>`` and ``=``. Every probability is an average over ``n`` joint draws and carries its Monte Carlo standard
+error ``sqrt(p (1 - p) / n)`` (:func:`mc_se`; the draws are evenly spaced over long chains, so taken as
+independent); a verdict is given only where the probability is more than two standard errors from its threshold
+(:func:`verdict`), otherwise it is ``undecided``.
 """
 
 from __future__ import annotations
@@ -28,22 +34,42 @@ CRITERIA = {
 }
 #: The joint criteria of the Pareto set (force, stroke, energy, hysteresis, speed).
 PARETO_CRITERIA = ("blocking_force_per_pressure", "stroke", "energy_per_pressure", "hysteresis_loss", "speed")
-#: "About equal" in the paper's orderings: |log ratio| within this band.
-EQUAL_BAND = 0.10
 #: Practical-equivalence margin: material a is *better than b by more than the margin* when its oriented value
 #: exceeds b's by more than this fraction of b's magnitude (5 %: about what separates two specimens of one
-#: material, so smaller differences do not decide a design).
+#: material, so smaller differences do not decide a design). The paper's ``a > b`` is checked as a exceeding b
+#: by more than it, ``a = b`` as the two within it of each other; ``recommend`` asks the force with it to spare.
 PRACTICAL_MARGIN = 0.05
-#: The paper's ordering agrees with the posterior when its probability is at least this (contradicts at most
-#: one minus it; undecided between).
+#: A claim (an ordering, *best*, *clearly best*) holds when its probability is at least this, and fails when it
+#: is at most one minus it, each by more than two Monte Carlo standard errors (:func:`verdict`).
 AGREEMENT = 0.9
+#: Monte Carlo standard errors a probability must clear its threshold by before a verdict is given.
+SE_CLEARANCE = 2.0
+
+
+def mc_se(p: float, n: int) -> float:
+    """Monte Carlo standard error of a probability ``p`` estimated as the share of ``n`` independent draws."""
+    if n < 1 or not math.isfinite(p):
+        return math.nan
+    return math.sqrt(max(p * (1.0 - p), 0.0) / n)
+
+
+def verdict(p: float, se: float, threshold: float = AGREEMENT, *, fails: bool = True) -> str:
+    """``"holds"`` when ``p`` exceeds ``threshold`` by more than :data:`SE_CLEARANCE` standard errors,
+    ``"fails"`` (if ``fails``) when it is below ``1 - threshold`` by as much, else ``"undecided"``."""
+    if not (math.isfinite(p) and math.isfinite(se)):
+        return "undecided"
+    if p - SE_CLEARANCE * se >= threshold:
+        return "holds"
+    if fails and p + SE_CLEARANCE * se <= 1.0 - threshold:
+        return "fails"
+    return "undecided"
 STIFFNESS = "stiffness_at_minus_1.5pct_0kPa"
 #: The paper's free strains were read by extrapolating its load cycles to zero force: its orderings are checked
 #: against the same reading of the predicted cycles, while the ranking's criterion is the muscle's own free strain.
 PAPER_FREE_STRAIN = "free_strain_paper_reading"
 
 #: The paper's orderings (``published_orderings.csv``, by row) as checks (metric, a, relation, b), relation
-#: ``">"`` (a larger) or ``"="`` (about equal, :data:`EQUAL_BAND`).
+#: ``">"`` (a larger) or ``"="`` (about equal), each within :data:`PRACTICAL_MARGIN` (:func:`ordering_checks`).
 PUBLISHED_ORDERINGS = [
     [("speed", "TP", ">", "P"), ("speed", "P", ">", "TFC"), ("speed", "TFC", ">", "PR")],
     [("speed", "FC", ">", "PCS"), ("speed", "PCS", ">", "TPC"), ("speed", "TPC", ">", "PC")],
@@ -72,24 +98,36 @@ PUBLISHED_ORDERINGS = [
 
 @dataclass(frozen=True)
 class CriterionRanking:
-    """One criterion over ``materials`` (m,): ``p_best`` (m,); ``p_better`` (m, m), P(row better than column);
-    ``mean_rank`` (m,) with ``rank_low``/``rank_high`` (94 % interval; 1 = best); ``n`` joint draws used;
-    with the practical margin ``margin``: ``p_better_by_margin`` (m, m), P(row better than column by more than
-    the margin), ``p_clearly_best`` (m,), P(better than every other by more than the margin), and
-    ``p_near_best`` (m,), P(no other better than it by more than the margin)."""
+    """One criterion over ``materials`` (m,), with the practical margin ``margin``: ``p_best`` (m,), P(best):
+    no other material better than it by more than the margin (several materials can be best together);
+    ``p_clearly_best`` (m,), P(better than every other by more than the margin); ``p_better`` (m, m),
+    P(row better than column); ``p_better_by_margin`` (m, m), P(row better than column by more than the margin);
+    ``mean_rank`` (m,) with ``rank_low``/``rank_high`` (94 % interval of the rank by value; 1 = best); ``n``
+    joint draws used (the Monte Carlo standard error of each probability is :func:`mc_se` of it and ``n``)."""
 
     criterion: str
     materials: tuple
     p_best: np.ndarray
+    p_clearly_best: np.ndarray
     p_better: np.ndarray
+    p_better_by_margin: np.ndarray
     mean_rank: np.ndarray
     rank_low: np.ndarray
     rank_high: np.ndarray
     n: int
     margin: float = PRACTICAL_MARGIN
-    p_better_by_margin: np.ndarray | None = None
-    p_clearly_best: np.ndarray | None = None
-    p_near_best: np.ndarray | None = None
+
+    def verdict(self) -> dict:
+        """The criterion's verdict: ``{"verdict": "clearly best" | "best" | "undecided", "materials": [...]}``:
+        *clearly best* when one material's P(clearly best) clears :data:`AGREEMENT` by two standard errors;
+        else *best*, naming every material whose P(best) does (more than one: equal within the margin);
+        else undecided."""
+        se = lambda p: mc_se(float(p), self.n)  # noqa: E731
+        for name, p in (("clearly best", self.p_clearly_best), ("best", self.p_best)):
+            holds = [c for c, q in zip(self.materials, p, strict=True) if verdict(q, se(q), fails=False) == "holds"]
+            if holds:
+                return {"verdict": name, "materials": holds}
+        return {"verdict": "undecided", "materials": []}
 
 
 def _joint(draws: dict, materials, names) -> np.ndarray:
@@ -106,7 +144,7 @@ def rank_criterion(draws: dict, criterion: str, materials=None, margin: float = 
     """Rank ``materials`` (default: all keys of ``draws``) by ``criterion``; ``draws`` maps code -> metric ->
     (n,) posterior predictive draws. Ties (equal draws) count as not better; materials tied for best in a
     draw share it equally, and tied materials share the better rank (1 + the number strictly better).
-    ``margin``: the practical-equivalence margin (:data:`PRACTICAL_MARGIN`)."""
+    ``margin``: the practical-equivalence margin (:data:`PRACTICAL_MARGIN`) of *best* and *clearly best*."""
     materials = tuple(materials or draws)
     values = _joint(draws, materials, (criterion,))[..., 0]  # (n, m)
     if values.shape[0] == 0:
@@ -115,20 +153,18 @@ def rank_criterion(draws: dict, criterion: str, materials=None, margin: float = 
     clearly = values[:, :, None] - values[:, None, :] > margin * np.abs(values[:, None, :])
     others = ~np.eye(len(materials), dtype=bool)[None]
     order = 1 + better.sum(axis=1)  # rank per draw, 1 = best
-    best = order == 1
     return CriterionRanking(
         criterion,
         materials,
-        np.mean(best / best.sum(axis=1, keepdims=True), axis=0),
-        better.mean(axis=0),
-        order.mean(axis=0),
-        np.quantile(order, 0.03, axis=0, method="inverted_cdf"),
-        np.quantile(order, 0.97, axis=0, method="inverted_cdf"),
-        values.shape[0],
-        margin,
-        clearly.mean(axis=0),
-        np.all(clearly | ~others, axis=2).mean(axis=0),
-        np.mean(~np.any(clearly & others, axis=1), axis=0),
+        p_best=np.mean(~np.any(clearly & others, axis=1), axis=0),
+        p_clearly_best=np.all(clearly | ~others, axis=2).mean(axis=0),
+        p_better=better.mean(axis=0),
+        p_better_by_margin=clearly.mean(axis=0),
+        mean_rank=order.mean(axis=0),
+        rank_low=np.quantile(order, 0.03, axis=0, method="inverted_cdf"),
+        rank_high=np.quantile(order, 0.97, axis=0, method="inverted_cdf"),
+        n=values.shape[0],
+        margin=margin,
     )
 
 
@@ -148,10 +184,10 @@ def ordering_counts(orderings: list[dict]) -> dict[str, int]:
     ``contradicts``, ``undecided``, and ``not informed`` (the metric rests on the prior only)."""
     counts = dict.fromkeys(("agrees", "contradicts", "undecided", "not informed"), 0)
     for o in orderings:
-        verdict = o.get("verdict", "undecided")
-        if verdict not in counts:
-            raise ValueError(f"ordering {o.get('a')} {o.get('relation')} {o.get('b')}: unknown verdict {verdict!r}")
-        counts[verdict] += 1
+        said = o.get("verdict", "undecided")
+        if said not in counts:
+            raise ValueError(f"ordering {o.get('a')} {o.get('relation')} {o.get('b')}: unknown verdict {said!r}")
+        counts[said] += 1
     return counts
 
 
@@ -161,17 +197,19 @@ def ordering_summary(orderings: list[dict]) -> str:
     informed = len(orderings) - c["not informed"]
     text = (
         f"Of the {informed} relations the fitted tests inform, the posteriors support {c['agrees']} at"
-        f" P >= {AGREEMENT:g}, contradict {c['contradicts']} at P <= {1 - AGREEMENT:.1f}, and leave"
-        f" {c['undecided']} undecided."
+        f" P >= {AGREEMENT:g}, contradict {c['contradicts']} at P <= {1 - AGREEMENT:.1f} (each by more than"
+        f" {SE_CLEARANCE:g} Monte Carlo standard errors), and leave {c['undecided']} undecided."
     )
     if c["not informed"]:
         text += f" {c['not informed']} more rest on the prior only (their metric was not fitted)."
     return text
 
 
-def ordering_checks(draws: dict) -> list[dict]:
+def ordering_checks(draws: dict, margin: float = PRACTICAL_MARGIN) -> list[dict]:
     """The paper's orderings checked on the posterior: per row of ``published_orderings.csv``, each relation
-    whose two materials are in ``draws`` with its probability (P(a > b), or P(|log a/b| <= EQUAL_BAND))."""
+    whose two materials are in ``draws``, with its ``probability`` over ``n`` paired draws (``a > b``: a exceeds
+    b by more than ``margin`` of b; ``a = b``: |log a/b| <= log(1 + margin)), its Monte Carlo standard error
+    ``se``, the ``margin`` and the ``verdict`` (agrees / contradicts / undecided, :func:`verdict`)."""
     out = []
     for row, checks in enumerate(PUBLISHED_ORDERINGS):
         for metric, a, relation, b in checks:
@@ -185,12 +223,11 @@ def ordering_checks(draws: dict) -> list[dict]:
             if not ok.any():
                 p = math.nan
             elif relation == ">":
-                p = float(np.mean(va[ok] > vb[ok]))
+                p = float(np.mean(va[ok] > (1.0 + margin) * vb[ok]))
             else:
-                p = float(np.mean(np.abs(np.log(va[ok] / vb[ok])) <= EQUAL_BAND))
-            verdict = "agrees" if p >= AGREEMENT else "contradicts" if p <= 1.0 - AGREEMENT else "undecided"
-            if math.isnan(p):
-                verdict = "undecided"
+                p = float(np.mean(np.abs(np.log(va[ok] / vb[ok])) <= math.log1p(margin)))
+            se = mc_se(p, int(ok.sum()))
+            said = {"holds": "agrees", "fails": "contradicts"}.get(verdict(p, se), "undecided")
             out.append(
                 {
                     "row": row,
@@ -199,7 +236,10 @@ def ordering_checks(draws: dict) -> list[dict]:
                     "relation": relation,
                     "b": b,
                     "probability": p,
-                    "verdict": verdict,
+                    "se": se,
+                    "n": int(ok.sum()),
+                    "margin": margin,
+                    "verdict": said,
                 }
             )
     return out
@@ -207,8 +247,8 @@ def ordering_checks(draws: dict) -> list[dict]:
 
 def failed_draw_counts(metrics: dict) -> dict:
     """code -> ``(failed, drawn)`` of each material's metrics file contents (code -> ``metrics.json``), for
-    :func:`rank_materials`'s ``failed_draws``; files written before the counts existed count none."""
-    return {code: (m.get("n_failed", 0), m.get("n_draws", 0)) for code, m in metrics.items()}
+    :func:`rank_materials`'s ``failed_draws``."""
+    return {code: (m.get("n_failed", 0), m.get("draws", 0)) for code, m in metrics.items()}
 
 
 def rank_materials(
@@ -218,9 +258,12 @@ def rank_materials(
     own_test_pressure_kpa: dict | None = None,
     failed_draws: dict | None = None,
 ) -> dict:
-    """Everything :mod:`peano_bayes.analysis.ranking` computes, as plain data: ``materials``; ``criteria`` (per
-    criterion: ``p_best``, ``mean_rank``, ``rank_interval`` by material, ``p_better`` matrix rows by material,
-    the margin probabilities, ``n`` draws; criteria no draw defines are left out); ``pareto`` (P(Pareto-optimal)
+    """Everything :mod:`peano_bayes.analysis.ranking` computes, as plain data: ``materials``; ``margin`` (the
+    practical-equivalence margin); ``draws`` (the fewest joint draws any criterion is ranked over); ``criteria``
+    (per criterion: ``p_best`` and ``p_clearly_best`` by material with their standard errors ``*_se``, its
+    ``verdict`` and the ``materials`` it names (:meth:`CriterionRanking.verdict`), ``mean_rank``,
+    ``rank_interval``, ``p_better`` and ``p_better_by_margin`` matrix rows by material, ``margin``, ``n`` draws;
+    criteria no draw defines are left out); ``pareto`` (P(Pareto-optimal)
     by material, over the Pareto criteria that are ranked); ``orderings`` (:func:`ordering_checks`);
     ``left_out`` (criterion -> why it is not ranked). ``draws``: code -> metric -> (n,) values; ``from_prior``:
     metrics the data did not inform in some material (e.g. the step metrics of fits without the step test):
@@ -247,23 +290,27 @@ def rank_materials(
         except ValueError:
             continue
         by = lambda values: dict(zip(materials, values, strict=True))  # noqa: E731
+        se = lambda values, n=r.n, by=by: by([mc_se(float(p), n) for p in values])  # noqa: E731
         criteria[criterion] = {
             "p_best": by(r.p_best.tolist()),
+            "p_best_se": se(r.p_best),
+            "p_clearly_best": by(r.p_clearly_best.tolist()),
+            "p_clearly_best_se": se(r.p_clearly_best),
+            **r.verdict(),
             "mean_rank": by(r.mean_rank.tolist()),
             "rank_interval": by([[int(lo), int(hi)] for lo, hi in zip(r.rank_low, r.rank_high, strict=True)]),
             "p_better": by([by(row.tolist()) for row in r.p_better]),
-            "margin": r.margin,
             "p_better_by_margin": by([by(row.tolist()) for row in r.p_better_by_margin]),
-            "p_clearly_best": by(r.p_clearly_best.tolist()),
-            "p_near_best": by(r.p_near_best.tolist()),
+            "margin": r.margin,
             "n": r.n,
             "from_prior": criterion in from_prior,
         }
     pareto_criteria = tuple(c for c in PARETO_CRITERIA if c not in left_out)
     try:
         pareto = pareto_probability(draws, materials, pareto_criteria)
+        pareto_n = len(_joint(draws, materials, pareto_criteria))
     except (ValueError, IndexError, KeyError):
-        pareto = {}
+        pareto, pareto_n = {}, 0
     orderings = [
         {**o, "from_prior": True, "verdict": "not informed"}
         if o["metric"] in from_prior
@@ -272,8 +319,11 @@ def rank_materials(
     ]
     return {
         "materials": list(materials),
+        "margin": PRACTICAL_MARGIN,
+        "draws": min((r["n"] for r in criteria.values()), default=0),
         "criteria": criteria,
         "pareto": pareto,
+        "pareto_se": {c: mc_se(p, pareto_n) for c, p in pareto.items()},
         "pareto_criteria": list(pareto_criteria),
         "orderings": orderings,
         "left_out": left_out,
@@ -286,13 +336,15 @@ def rank_materials(
 def ranking_markdown(report: dict) -> str:
     """Markdown of :func:`rank_materials`: per criterion P(best) and expected rank; the Pareto set; orderings."""
     materials = report["materials"]
-    margin = next((r["margin"] for r in report["criteria"].values() if "margin" in r), PRACTICAL_MARGIN)
+    margin = report.get("margin", PRACTICAL_MARGIN)
     lines = [
-        "### Per criterion: P(best), P(clearly best), P(near best) and expected rank (94 % interval)",
+        "### Per criterion: P(best), P(clearly best) and expected rank (94 % interval)",
         "",
-        f"*Clearly best*: better than every other material by more than {100 * margin:g} % (the practical-"
-        f"equivalence margin); *near best*: no material better than it by more than {100 * margin:g} %. Where "
-        "several materials are near best with high probability, the data do not tell them apart for design.",
+        f"*Best*: no material better than it by more than {100 * margin:g} % (the practical-equivalence margin; "
+        f"several materials can be best together); *clearly best*: better than every other by more than "
+        f"{100 * margin:g} %. Each probability is over {report.get('draws', 'the')} joint posterior draws, "
+        f"± its Monte Carlo standard error; a verdict needs the probability above {AGREEMENT:g} by more than "
+        f"{SE_CLEARANCE:g} standard errors, else it is undecided.",
         "",
     ]
     pressures = {c: p for c, p in report.get("test_pressure_kpa", {}).items() if p is not None}
@@ -326,19 +378,22 @@ def ranking_markdown(report: dict) -> str:
             "could simulate here, which leans them towards the parameters it simulates most easily.",
             "",
         ]
-    lines.append("| criterion | " + " | ".join(materials) + " |")
-    lines.append("|---|" + "---|" * len(materials))
+    lines.append("| criterion | verdict | " + " | ".join(materials) + " |")
+    lines.append("|---|---|" + "---|" * len(materials))
     for criterion, r in report["criteria"].items():
         label = f"{criterion} ({'lower' if CRITERIA[criterion] < 0 else 'higher'} is better)"
         label += " (prior only: not fitted)" if r.get("from_prior") else ""
+        said = r.get("verdict", "undecided")
+        said = f"{said}: {', '.join(r['materials'])}" if r.get("materials") else said
         cells = []
         for c in materials:
             low, high = r["rank_interval"][c]
-            extra = ""
-            if "p_clearly_best" in r:
-                extra = f" / {r['p_clearly_best'][c]:.2f} / {r['p_near_best'][c]:.2f}"
-            cells.append(f"{r['p_best'][c]:.2f}{extra}, rank {r['mean_rank'][c]:.1f} ({low}-{high})")
-        lines.append(f"| {label} | " + " | ".join(cells) + " |")
+            cells.append(
+                f"{_with_se(r['p_best'][c], r['p_best_se'][c])} / "
+                f"{_with_se(r['p_clearly_best'][c], r['p_clearly_best_se'][c])}, "
+                f"rank {r['mean_rank'][c]:.1f} ({low}-{high})"
+            )
+        lines.append(f"| {label} | {said} | " + " | ".join(cells) + " |")
     for criterion, why in report.get("left_out", {}).items():
         lines += ["", f"Not ranked: {criterion}, {why}."]
     if report["pareto"]:
@@ -346,15 +401,22 @@ def ranking_markdown(report: dict) -> str:
         lines += ["", f"### P(Pareto-optimal) over {', '.join(over)}", ""]
         lines.append("| " + " | ".join(materials) + " |")
         lines.append("|" + "---|" * len(materials))
-        lines.append("| " + " | ".join(f"{report['pareto'][c]:.2f}" for c in materials) + " |")
-        likely = [c for c in materials if report["pareto"][c] >= 0.9]
-        lines += ["", f"Pareto-optimal with probability >= 0.9: {', '.join(likely) or 'none'}."]
+        se = report.get("pareto_se", {})
+        lines.append("| " + " | ".join(_with_se(report["pareto"][c], se.get(c, math.nan)) for c in materials) + " |")
+        likely = [c for c in materials if verdict(report["pareto"][c], se.get(c, 0.0), fails=False) == "holds"]
+        lines += [
+            "",
+            f"Pareto-optimal with probability >= {AGREEMENT:g} (by more than {SE_CLEARANCE:g} standard errors): "
+            f"{', '.join(likely) or 'none'}.",
+        ]
     if report["orderings"]:
         lines += [
             "",
             "### The paper's orderings on the posterior",
             "",
-            f"Agrees: probability >= {AGREEMENT:g}; contradicts: <= {1 - AGREEMENT:.1f}; undecided between.",
+            f"*a > b*: a exceeds b by more than {100 * margin:g} %; *about equal*: within {100 * margin:g} % of each "
+            f"other. Agrees: probability >= {AGREEMENT:g}; contradicts: <= {1 - AGREEMENT:.1f}, each by more than "
+            f"{SE_CLEARANCE:g} Monte Carlo standard errors; undecided otherwise.",
             "",
             ordering_summary(report["orderings"]),
             "",
@@ -364,12 +426,16 @@ def ranking_markdown(report: dict) -> str:
         for o in report["orderings"]:
             shown = "about equal to" if o["relation"] == "=" else ">"
             flag = " (prior only: not fitted)" if o.get("from_prior") else ""
-            verdict = o.get("verdict", "")
-            verdict = f"**{verdict}**" if verdict == "contradicts" else verdict
-            lines.append(
-                f"| {o['metric']}{flag} | {o['a']} {shown} {o['b']} | {o['probability']:.2f} | {verdict} |"
-            )
+            said = o.get("verdict", "")
+            said = f"**{said}**" if said == "contradicts" else said
+            p = _with_se(o["probability"], o["se"]) if "se" in o else f"{o['probability']:.2f}"
+            lines.append(f"| {o['metric']}{flag} | {o['a']} {shown} {o['b']} | {p} | {said} |")
     return "\n".join(lines)
+
+
+def _with_se(p: float, se: float) -> str:
+    """A probability with its Monte Carlo standard error, e.g. ``0.93 ± 0.01``."""
+    return f"{p:.2f} ± {se:.2f}" if math.isfinite(se) else f"{p:.2f}"
 
 
 __all__ = [
@@ -377,10 +443,11 @@ __all__ = [
     "PRACTICAL_MARGIN",
     "CRITERIA",
     "failed_draw_counts",
-    "EQUAL_BAND",
+    "SE_CLEARANCE",
     "PARETO_CRITERIA",
     "PUBLISHED_ORDERINGS",
     "CriterionRanking",
+    "mc_se",
     "ordering_checks",
     "ordering_counts",
     "ordering_summary",
@@ -388,4 +455,5 @@ __all__ = [
     "rank_criterion",
     "rank_materials",
     "ranking_markdown",
+    "verdict",
 ]

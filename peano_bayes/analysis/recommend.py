@@ -25,11 +25,16 @@ requirement at once, over joint posterior draws of its material, for a **new spe
   their prior, so this requirement is scored on prior knowledge, and the report says so;
 - width, length: geometry alone; thickness: :func:`thickness_m`, the fully inflated tube plus its walls.
 
-A candidate beyond a limit of its material (``bundled/data/design_limits.toml``: above the highest tested
-pressure, where the posterior would extrapolate, or above a burst pressure the paper reports) is infeasible:
-its probability is 0 and ``infeasible`` says why. Candidates are ranked by probability, then by the force
-margin; each carries every requirement's probability and median margin, the force margin's 94 % interval and
-its *binding* requirement, the one least likely to hold.
+A candidate beyond a limit of its material is infeasible: its probability is 0 and ``infeasible`` says why.
+The limits (:func:`material_limits`) are the highest pressure the material was tested at, where the posterior
+would start to extrapolate (``bundled/data/design_limits.toml`` for the paper's materials, the test pressure of
+the fitted data for any other), and a burst pressure, where the paper reports one or the spec states one
+(``[limits.CODE] burst_kpa``). Candidates are ranked by probability, then by the force margin; each carries
+every requirement's probability and median margin, the force margin's 94 % interval, its *binding* requirement
+(the one least likely to hold), the probability's Monte Carlo standard error over the ``draws`` it rests on, and
+the probability that the force holds with the practical margin (:data:`~peano_bayes.analysis.ranking.
+PRACTICAL_MARGIN`) to spare. The top candidate is *recommended* only where its probability exceeds the next
+feasible candidate's by more than two standard errors of the difference; otherwise the two are tied.
 """
 
 from __future__ import annotations
@@ -39,7 +44,7 @@ import itertools
 import json
 import math
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import jax
@@ -47,13 +52,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import bundled
-from ..defaults import MAX_MOUNT_COMPLIANCE_M_PER_N, MAX_PRESSURE_KPA
+from ..defaults import DEFAULT_DRAWS, MAX_MOUNT_COMPLIANCE_M_PER_N, MAX_PRESSURE_KPA
 from ..errors import PeanoBayesInputError, did_you_mean
 from ..inference.posterior import SPECIMEN_SD
 from ..inference.reduce import SPECIMEN_SCALED
 from ..materials import MATERIALS
 from ..physics import Geometry, LoadCycle, scale_parameters, simulate_load_cycle
 from ..physics.pouch import IDEAL_FREE_STRAIN
+from .ranking import PRACTICAL_MARGIN, SE_CLEARANCE, mc_se
 
 #: Strain [-] the muscle is stretched past the required contraction before contracting back to it, so that
 #: friction and the viscoelastic elements are in their contracting state when the force is read.
@@ -64,6 +70,8 @@ OPERATING_RATE_PER_S = 0.01
 _OPERATING_SAMPLES = 101
 #: Probability mass of the reported intervals.
 HDI_PROB = 0.94
+#: The fitted tests whose force misfit the operating force carries (both read the muscle's force at pressure).
+FORCE_TESTS = ("load_cycle", "blocking")
 
 _REQUIREMENT_KEYS = {
     "force_n": "minimum force [N]",
@@ -77,7 +85,8 @@ _REQUIREMENT_KEYS = {
 }
 _REQUIRED = ("force_n", "contraction", "max_pressure_kpa")
 _CANDIDATE_KEYS = ("materials", "n_tubes", "tube_width_mm", "tube_length_mm")
-_SECTIONS = ("requirement", "candidates", "results")
+_SECTIONS = ("requirement", "candidates", "results", "limits")
+_LIMIT_KEYS = ("burst_kpa",)
 
 
 @dataclass(frozen=True)
@@ -106,6 +115,8 @@ class Spec:
     results_dir: Path
     n_draws: int
     source: Path
+    #: code -> burst pressure [kPa] the spec states (``[limits.CODE] burst_kpa``).
+    burst_kpa: dict = field(default_factory=dict)
 
 
 def _number(value, where: str) -> float:
@@ -197,10 +208,20 @@ def load_spec(path: str | Path) -> Spec:
     results_dir = res.get("dir", "results")
     if not isinstance(results_dir, str) or not results_dir:
         raise PeanoBayesInputError(f"{path} [results] dir: expected a folder path (string), got {results_dir!r}")
-    n_draws = res.get("n_draws", 100)
+    n_draws = res.get("n_draws", DEFAULT_DRAWS)
     if isinstance(n_draws, bool) or not isinstance(n_draws, int) or n_draws < 1:
         raise PeanoBayesInputError(f"{path} [results] n_draws: expected a whole number >= 1, got {n_draws!r}")
     where = lambda key: f"{path} [candidates] {key}"  # noqa: E731
+    limits = raw.get("limits", {})
+    if not isinstance(limits, dict) or not all(isinstance(v, dict) for v in limits.values()):
+        raise PeanoBayesInputError(
+            f"{path}: [limits] must hold one table per material, e.g. [limits.VM] burst_kpa = 150; got {limits!r}"
+        )
+    burst = {}
+    for code, table in limits.items():
+        _unknown(table, _LIMIT_KEYS, f"{path} [limits.{code}]")
+        if "burst_kpa" in table:
+            burst[code] = _number(table["burst_kpa"], f"{path} [limits.{code}] burst_kpa")
     return Spec(
         requirement=requirement,
         materials=_list(cand["materials"], where("materials"), str) if "materials" in cand else (),
@@ -212,6 +233,7 @@ def load_spec(path: str | Path) -> Spec:
         results_dir=(path.parent / results_dir).resolve() if "dir" in res else Path(results_dir),
         n_draws=n_draws,
         source=path,
+        burst_kpa=burst,
     )
 
 
@@ -254,34 +276,45 @@ def thickness_m(geometry: Geometry, code: str | None = None) -> float:
     return 2.0 * (geometry.tube_width_m + h0) / math.pi + 2.0 * walls
 
 
-def material_limits(code: str, idata=None) -> dict | None:
-    """The pressure limits of material ``code``: ``max_tested_kpa``, ``burst_kpa`` where known, and ``source``.
-    The bundled ``design_limits.toml`` for the paper's materials; for any other, the test pressure of the data
-    its result was fitted to (``idata``'s ``conditions``), the highest pressure its posterior has seen. ``None``
-    where neither says (then :func:`limit_violations` refuses every pressure: a material is never extrapolated
-    silently)."""
+def material_limits(
+    code: str, idata=None, burst_kpa: float | None = None, stated_in: str = "the spec"
+) -> dict | None:
+    """The pressure limits of material ``code``: ``max_tested_kpa`` with its ``source``, and ``burst_kpa`` with
+    its ``burst_source`` where one is known. The tested pressure: the bundled ``design_limits.toml`` for the
+    paper's materials; for any other, the test pressure of the data its result was fitted to (``idata``'s
+    ``conditions``), the highest pressure its posterior has seen. The burst pressure: the lower of the paper's
+    and ``burst_kpa`` (stated in ``stated_in``). ``None`` where no tested pressure is known (then
+    :func:`limit_violations` refuses every pressure: a material is never extrapolated silently)."""
     limits = design_limits()["pressure"].get(code)
-    if limits is not None:
-        return dict(limits)
-    raw = None if idata is None else idata.posterior.attrs.get("conditions")
-    tested = json.loads(raw).get("test_pressure_pa") if raw else None
-    if tested is None:
-        return None
-    return {"max_tested_kpa": float(tested) / 1e3, "source": "the test pressure of the data its result was fitted to"}
+    limits = None if limits is None else dict(limits)
+    if limits is None:
+        raw = None if idata is None else idata.posterior.attrs.get("conditions")
+        tested = json.loads(raw).get("test_pressure_pa") if raw else None
+        if tested is None:
+            return None
+        source = "the test pressure of the data its result was fitted to"
+        limits = {"max_tested_kpa": float(tested) / 1e3, "source": source}
+    if "burst_kpa" in limits:
+        limits.setdefault("burst_source", limits["source"])
+    if burst_kpa is not None and burst_kpa < limits.get("burst_kpa", math.inf):
+        limits["burst_kpa"], limits["burst_source"] = float(burst_kpa), f"stated in {stated_in}"
+    return limits
 
 
-def limit_violations(code: str, max_pressure_pa: float, idata=None) -> list[str]:
+def limit_violations(
+    code: str, max_pressure_pa: float, idata=None, burst_kpa: float | None = None, stated_in: str = "the spec"
+) -> list[str]:
     """Why a material cannot be used at ``max_pressure_pa``: above its highest tested pressure or a known burst
-    pressure (:func:`material_limits` of ``code`` and its result ``idata``); empty when it can. With no limits
-    known every pressure is refused: its tested pressure is unknown, so the posterior's validity there is too."""
-    limits = material_limits(code, idata)
+    pressure (:func:`material_limits` of ``code``, its result ``idata`` and a stated ``burst_kpa``); empty when
+    it can. With no tested pressure known every pressure is refused: the posterior's validity there is unknown."""
+    limits = material_limits(code, idata, burst_kpa, stated_in)
     kpa = max_pressure_pa / 1e3
     if limits is None:
         return [f"{kpa:g} kPa cannot be checked against the pressure {code} was tested at: none is known"]
     reasons = []
     if "burst_kpa" in limits and kpa > limits["burst_kpa"]:
         reasons.append(
-            f"{kpa:g} kPa is above {code}'s burst pressure of {limits['burst_kpa']:g} kPa ({limits['source']})"
+            f"{kpa:g} kPa is above {code}'s burst pressure of {limits['burst_kpa']:g} kPa ({limits['burst_source']})"
         )
     if kpa > limits["max_tested_kpa"]:
         reasons.append(
@@ -372,7 +405,13 @@ def _interval(values: np.ndarray) -> list[float]:
 
 
 def evaluate_candidates(
-    spec: Spec, materials: dict, *, mount_compliance_m_per_n: float = 0.0, seed: int = 0, log=print
+    spec: Spec,
+    materials: dict,
+    *,
+    mount_compliance_m_per_n: float = 0.0,
+    seed: int = 0,
+    discrepancy: dict | None = None,
+    log=print,
 ) -> tuple[list[dict], list[str]]:
     """Every candidate of ``spec`` over ``materials`` (code -> ``(idata, metrics or None)``), best first, and
     the rig artefacts removed from the predictions (see the module docstring).
@@ -380,8 +419,15 @@ def evaluate_candidates(
     Each candidate: ``material``, ``n_tubes``, ``tube_width_mm``, ``tube_length_mm``, ``probability`` of
     meeting every requirement (0 if infeasible), ``p_each`` (requirement -> probability it holds), ``margin``
     (requirement -> median fraction of the bound to spare; negative means violated), ``force_margin_interval``
-    (94 % interval of the force margin), ``binding``, ``force_median_n``, ``force_interval_n`` (94 %) and
-    ``infeasible`` (the limits it breaks, empty if none)."""
+    (94 % interval of the force margin), ``binding``, ``force_median_n``, ``force_interval_n`` (94 %),
+    ``force_discrepancy_sd_n`` and ``infeasible`` (the limits it breaks, empty if none).
+
+    ``discrepancy``: code -> test -> sd of the fit's misfit beyond the noise [N or strain]
+    (:func:`~peano_bayes.analysis.metrics.misfit_discrepancy`). Where a material's load cycles or blocking test
+    misfit, the larger force misfit is added to its operating-force draws as a normal value per draw, as the
+    metrics add it: in proportion to the force (its size at the result's own geometry scaled by the candidate's
+    median force over the result geometry's, at the same pressure and contraction), growing in proportion to
+    pressure above the tested one."""
     from ..inference.results import parameter_draws, result_config
 
     req = spec.requirement
@@ -400,7 +446,7 @@ def evaluate_candidates(
                 raise PeanoBayesInputError(
                     f"material {code}: {name} needs its metrics.json; run 'peano-bayes metrics' first"
                 )
-            paired[name] = np.asarray(metrics["draws"][metric], float)
+            paired[name] = np.asarray(metrics["draw_values"][metric], float)
             n_draws = len(paired[name])  # the same evenly spaced posterior draws, so they pair by index
         total = idata.posterior.sizes["chain"] * idata.posterior.sizes["draw"]
         param_sets, _ = parameter_draws(idata, min(n_draws, total))
@@ -409,12 +455,24 @@ def evaluate_candidates(
         )
         removed += [f"{code}: {a}" for a in artefacts]
         reference = _result_geometry(idata)
-        infeasible = limit_violations(code, req.max_pressure_pa, idata)
+        infeasible = limit_violations(code, req.max_pressure_pa, idata, spec.burst_kpa.get(code), str(spec.source))
+        misfit_n = max((s for t, s in (discrepancy or {}).get(code, {}).items() if t in FORCE_TESTS), default=0.0)
+        if misfit_n > 0:
+            at_reference = operating_forces(
+                {k: jnp.asarray(v) for k, v in stacked.items()}, config, reference, req.max_pressure_pa, req.contraction
+            )
+            limits = material_limits(code, idata, spec.burst_kpa.get(code), str(spec.source))
+            growth = 1.0 if limits is None else max(1.0, req.max_pressure_pa / (1e3 * limits["max_tested_kpa"]))
+            z = np.random.default_rng([seed, 13]).standard_normal(len(param_sets))
         log(f"{code}: {len(param_sets)} posterior draws (new specimens) over the candidate geometries")
         for n, w, length in itertools.product(spec.n_tubes, spec.tube_width_m, spec.tube_length_m):
             target = Geometry(n_tubes=n, tube_width_m=w, tube_length_m=length)
             scaled = {k: jnp.asarray(v) for k, v in scale_parameters(stacked, reference, target).items()}
             force = operating_forces(scaled, config, target, req.max_pressure_pa, req.contraction)
+            sd_n = None
+            if misfit_n > 0:
+                sd_n = misfit_n * growth * abs(np.nanmedian(force) / np.nanmedian(at_reference))
+                force = force + sd_n * z
             holds = {"force": np.isfinite(force) & (force >= req.force_n)}
             margin = {"force": float(np.median(force) / req.force_n - 1.0)}
             if "hysteresis" in paired:
@@ -430,6 +488,7 @@ def evaluate_candidates(
                 margin[name] = m
             p_each = {name: float(np.mean(h)) for name, h in holds.items()}
             joint = 0.0 if infeasible else float(np.mean(np.all(np.stack(list(holds.values())), axis=0)))
+            with_margin = np.isfinite(force) & (force >= (1.0 + PRACTICAL_MARGIN) * req.force_n)
             binding = min(p_each, key=lambda k: (p_each[k], margin[k]))
             out.append(
                 dict(
@@ -438,12 +497,16 @@ def evaluate_candidates(
                     tube_width_mm=1e3 * w,
                     tube_length_mm=1e3 * length,
                     probability=joint,
+                    probability_se=mc_se(joint, len(force)),
+                    draws=len(force),
+                    p_force_with_margin=0.0 if infeasible else float(np.mean(with_margin)),
                     p_each=p_each,
                     margin=margin,
                     force_margin_interval=[x / req.force_n - 1.0 for x in _interval(force)],
                     binding=binding,
                     force_median_n=float(np.median(force)),
                     force_interval_n=_interval(force),
+                    force_discrepancy_sd_n=None if sd_n is None else float(sd_n),
                     infeasible=infeasible,
                 )
             )
@@ -460,6 +523,25 @@ def _result_geometry(idata) -> Geometry:
     return Geometry(n_tubes=int(g["n_tubes"]), tube_width_m=g["tube_width_m"], tube_length_m=g["tube_length_m"])
 
 
+def recommended(candidates: list[dict]) -> dict:
+    """Whether the top of ``candidates`` (best first) is recommended: ``{"verdict": "recommended" | "tied" |
+    "none", "candidates": [indices]}``. *Recommended* when it is feasible and its probability exceeds every other
+    feasible candidate's by more than :data:`~peano_bayes.analysis.ranking.SE_CLEARANCE` standard errors of the
+    difference (taken as independent: conservative for two geometries of one material, whose draws are shared);
+    *tied* naming the candidates within that of it; *none* when no candidate is feasible."""
+    feasible = [i for i, c in enumerate(candidates) if not c["infeasible"]]
+    if not feasible:
+        return {"verdict": "none", "candidates": []}
+    top = candidates[feasible[0]]
+    tied = [
+        i
+        for i in feasible[1:]
+        if top["probability"] - candidates[i]["probability"]
+        <= SE_CLEARANCE * math.hypot(top["probability_se"], candidates[i]["probability_se"])
+    ]
+    return {"verdict": "tied" if tied else "recommended", "candidates": [feasible[0], *tied]}
+
+
 def explain(candidate: dict, requirement: Requirement) -> str:
     """One sentence on why a candidate ranks where it does."""
     c = candidate
@@ -474,7 +556,8 @@ def explain(candidate: dict, requirement: Requirement) -> str:
         return f"{design} is infeasible: {'; '.join(c['infeasible'])}; it would give {force}."
     binding = c["binding"]
     text = (
-        f"{design} meets every requirement with probability {c['probability']:.2f}, with {force}; "
+        f"{design} meets every requirement with probability {c['probability']:.2f} ± {c['probability_se']:.2f} "
+        f"(Monte Carlo standard error over {c['draws']} draws), with {force}; "
         f"the binding requirement is {binding} (P = {c['p_each'][binding]:.2f}, median margin "
         f"{100 * c['margin'][binding]:+.0f} %)."
     )
@@ -530,7 +613,7 @@ def recommend(
         materials[code] = (load_result(directory), metrics)
         misfits[code] = result_discrepancy(directory)
     candidates, removed = evaluate_candidates(
-        spec, materials, mount_compliance_m_per_n=mount_compliance_m_per_n, seed=seed, log=log
+        spec, materials, mount_compliance_m_per_n=mount_compliance_m_per_n, seed=seed, discrepancy=misfits, log=log
     )
     notes = []
     if spec.requirement.max_response_time_s is not None:
@@ -542,10 +625,16 @@ def recommend(
             )
     for code, tests in misfits.items():
         if tests:
+            carried = [t for t in tests if t in FORCE_TESTS]
             notes.append(
                 f"the model misfits {code}'s {', '.join(tests)} test{'s' if len(tests) > 1 else ''} beyond the "
-                "sensor noise (residuals with structure): its predictions and probabilities are the closest "
-                "model's and do not include that misfit"
+                "sensor noise (residuals with structure): "
+                + (
+                    f"its operating forces carry the {' / '.join(carried)} force misfit as a model discrepancy "
+                    "(force_discrepancy_sd_n), so its probabilities are wider than the closest model's"
+                    if carried
+                    else "its predictions are the closest model's and do not include that misfit"
+                )
             )
     unconverged = [c for c, (idata, _) in materials.items() if not idata.posterior.attrs.get("converged", 1)]
     if unconverged:
@@ -553,7 +642,13 @@ def recommend(
     return {
         "spec": str(spec.source),
         "requirement": spec.requirement.__dict__,
-        "limits": {code: material_limits(code, idata) for code, (idata, _) in materials.items()},
+        "limits": {
+            code: material_limits(code, idata, spec.burst_kpa.get(code), str(spec.source))
+            for code, (idata, _) in materials.items()
+        },
+        "margin": PRACTICAL_MARGIN,
+        "draws": {c["material"]: c["draws"] for c in candidates},
+        "recommended": recommended(candidates),
         "candidates": candidates,
         "explanation": explain(candidates[0], spec.requirement),
         "removed": removed,
@@ -564,25 +659,42 @@ def recommend(
 def recommendation_markdown(report: dict, top: int = 10) -> str:
     """The ``top`` candidates as a markdown table, then the one-sentence explanation of the first, what was
     removed from the rig's conditions and the notes."""
+    margin = report.get("margin", PRACTICAL_MARGIN)
     lines = [
-        "| rank | material | tubes | w [mm] | l [mm] | P(meets all) | operating force [N] (94 %) | force margin "
-        "(94 %) | binding |",
-        "|---|---|---|---|---|---|---|---|---|",
+        f"| rank | material | tubes | w [mm] | l [mm] | P(meets all) | P(force +{100 * margin:g} %) | operating "
+        "force [N] (94 %) | force margin (94 %) | binding |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for i, c in enumerate(report["candidates"][:top], 1):
         low, high = c["force_interval_n"]
         m_low, m_high = c["force_margin_interval"]
-        binding = "infeasible" if c["infeasible"] else f"{c['binding']} ({c['p_each'][c['binding']]:.2f})"
+        p_binding = c["p_each"][c["binding"]]
+        binding = f"{c['binding']} ({p_binding:.2f} ± {mc_se(p_binding, c['draws']):.2f})"
+        binding = "infeasible" if c["infeasible"] else binding
         lines.append(
             f"| {i} | {c['material']} | {c['n_tubes']} | {c['tube_width_mm']:g} | {c['tube_length_mm']:g} | "
-            f"{c['probability']:.2f} | {c['force_median_n']:.1f} ({low:.1f} to {high:.1f}) | "
+            f"{c['probability']:.2f} ± {c['probability_se']:.2f} | "
+            f"{c['p_force_with_margin']:.2f} ± {mc_se(c['p_force_with_margin'], c['draws']):.2f} | "
+            f"{c['force_median_n']:.1f} ({low:.1f} to {high:.1f}) | "
             f"{100 * c['margin']['force']:+.0f} % ({100 * m_low:+.0f} to {100 * m_high:+.0f} %) | {binding} |"
         )
     refused = {c["material"]: c["infeasible"] for c in report["candidates"] if c["infeasible"]}
+    verdict = report.get("recommended", {})
+    tied = verdict.get("candidates", [])[1:]
+    lead = []
+    if verdict.get("verdict") == "tied":
+        lead = [
+            f"**No single recommendation**: candidate{'s' if len(tied) > 1 else ''} "
+            f"{', '.join(str(i + 1) for i in tied)} {'are' if len(tied) > 1 else 'is'} within {SE_CLEARANCE:g} Monte "
+            "Carlo standard errors of the first: more draws or the other requirements decide between them.",
+            "",
+        ]
     extra = [f"Infeasible: {code}: {'; '.join(reasons)}." for code, reasons in refused.items()]
     extra += [f"Design conditions: {r}." for r in report.get("removed", [])]
     extra += [f"Note: {n}." for n in report.get("notes", [])]
-    return "\n".join(lines + ["", report["explanation"], *([""] + extra if extra else [])])
+    head = [f"*P(force +{100 * margin:g} %)*: the probability the operating force clears the requirement by the "
+            f"practical margin of {100 * margin:g} %; ± the Monte Carlo standard error.", ""]  # fmt: skip
+    return "\n".join(head + lines + ["", *lead, report["explanation"], *([""] + extra if extra else [])])
 
 
 __all__ = [
@@ -595,6 +707,8 @@ __all__ = [
     "explain",
     "limit_violations",
     "load_spec",
+    "material_limits",
+    "recommended",
     "new_specimen_draws",
     "operating_forces",
     "operating_strain",

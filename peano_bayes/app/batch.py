@@ -14,6 +14,7 @@ from .. import bundled
 from ..atomic import write_text
 from ..data import Dataset, load
 from ..defaults import (
+    DEFAULT_DRAWS,
     DEFAULT_MAX_STEPS,
     DEFAULT_TESTS,
 )
@@ -43,7 +44,7 @@ def reference_models(directory: Path, summary: dict, *, log=print) -> dict | Non
 
 
 def material_report(
-    directory: Path, summary: dict, *, n_draws: int = 100, log=print
+    directory: Path, summary: dict, *, n_draws: int | None = None, log=print
 ) -> tuple[dict | None, dict | None]:
     """One finished material's part of the report, each piece computed only where it is missing: the reference
     models' fit (:func:`reference_models`), ``metrics.json``
@@ -53,6 +54,7 @@ def material_report(
     from ..analysis.metrics import evaluate_result, metrics_current, read_metrics
     from ..report.figures import material_figures
 
+    n_draws = REPORT_DRAWS if n_draws is None else n_draws
     code = summary["material"]
     references = reference_models(directory, summary, log=log)
     current = metrics_current(directory)
@@ -70,8 +72,8 @@ def material_report(
     return references, read_metrics(directory) if current else None
 
 
-#: Posterior draws the main job's metrics, ranking and recommendation read.
-REPORT_DRAWS = 100
+#: Posterior draws the main job's metrics, ranking and recommendation read (the metrics' default).
+REPORT_DRAWS = DEFAULT_DRAWS
 
 
 def report_results(out_dir: str | Path, materials=BUNDLED_MATERIALS, *, n_draws: int = REPORT_DRAWS, log=print) -> dict:
@@ -97,7 +99,7 @@ def report_results(out_dir: str | Path, materials=BUNDLED_MATERIALS, *, n_draws:
         results[code] = load_result(directory)
     prior_only = {name for m in metrics.values() for name, s in m["summary"].items() if s["from_prior"]}
     pressures = {c: m.get("test_pressure_kpa") for c, m in metrics.items()}
-    draws, failed = {c: m["draws"] for c, m in metrics.items()}, failed_draw_counts(metrics)
+    draws, failed = {c: m["draw_values"] for c, m in metrics.items()}, failed_draw_counts(metrics)
     ranking = (
         rank_materials(draws, from_prior=prior_only, test_pressure_kpa=pressures, failed_draws=failed)
         if metrics

@@ -75,35 +75,46 @@ def physical_names(idata) -> list[str]:
     ]
 
 
-def predictive_runs(idata) -> list[dict]:
+def predictive_runs(idata, discrepancy: dict | None = None) -> list[dict]:
     """Per fitted test, one run per distinct condition (the first specimen's first run, and for load cycles
     also the first run at the test pressure): ``test``, ``title``, ``time_s``, ``observed``, ``low``,
-    ``median``, ``high`` (94 % predictive quantiles of the bin means, posterior_predictive group)."""
+    ``median``, ``high`` (94 % predictive quantiles of the bin means, posterior_predictive group) and
+    ``discrepancy_sd``. ``discrepancy``: test -> sd of its model misfit beyond the noise [signal unit]
+    (:func:`~peano_bayes.analysis.metrics.misfit_discrepancy`); a test that has one gets a normal value of that
+    sd added to every predictive draw of every bin (seeded), so its band holds the data the model misfits as
+    the metrics' intervals do."""
     obs = idata.observed_data
     tests, specimens, runs = (np.asarray(obs[k].values) for k in ("test", "specimen", "run"))
     time_s, y = np.asarray(obs["time_s"].values), np.asarray(obs["y"].values)
     yrep = idata.posterior_predictive["y"].stack(sample=("chain", "draw")).transpose("sample", "bin").values
     out = []
     first = specimens[0]
+    rng = np.random.default_rng(0)
     for test in dict.fromkeys(tests):
+        sd = (discrepancy or {}).get(str(test))
         candidates = sorted({int(r) for r in runs[(tests == test) & (specimens == first)]})
         chosen = candidates[:1]
         if test == "load_cycle" and len(candidates) > 1:
             chosen.append(candidates[len(candidates) // 2])  # the paper's protocol: first half at 0 kPa
         for run in chosen:
             mask = (tests == test) & (specimens == first) & (runs == run)
-            low, median, high = np.quantile(yrep[:, mask], QUANTILES, axis=0)
+            sample = yrep[:, mask]
+            if sd:
+                sample = sample + sd * rng.standard_normal(sample.shape)
+            low, median, high = np.quantile(sample, QUANTILES, axis=0)
             out.append(
                 dict(
                     test=test,
                     specimen=first,
                     run=run,
-                    title=f"{TEST_TITLE.get(test, test)}: specimen {first}, run {run}",
+                    title=f"{TEST_TITLE.get(test, test)}: specimen {first}, run {run}"
+                    + (f"\n(+ model misfit, sd {sd:.3g})" if sd else ""),
                     time_s=time_s[mask],
                     observed=y[mask],
                     low=low,
                     median=median,
                     high=high,
+                    discrepancy_sd=sd,
                 )
             )
     return out
@@ -117,7 +128,7 @@ RESPONSE_AXIS = {
 }
 
 
-def response_runs(idata) -> list[dict]:
+def response_runs(idata, discrepancy: dict | None = None) -> list[dict]:
     """The runs of :func:`predictive_runs` of the quasi-static tests against their driving input, as engineers
     read them: load cycles as force against strain (one per pressure), blocking force and stroke against
     pressure. Each panel adds ``x`` and ``xlabel``; the title names the condition. Empty for results written
@@ -127,7 +138,7 @@ def response_runs(idata) -> list[dict]:
         return []
     tests, specimens, runs = (np.asarray(obs[k].values) for k in ("test", "specimen", "run"))
     out = []
-    for panel in predictive_runs(idata):
+    for panel in predictive_runs(idata, discrepancy):
         if panel["test"] not in RESPONSE_AXIS:
             continue
         name, scale, xlabel = RESPONSE_AXIS[panel["test"]]
@@ -139,7 +150,9 @@ def response_runs(idata) -> list[dict]:
             pressure_kpa = float(np.median(np.asarray(obs["pressure_pa"].values)[mask])) / 1e3
             title = f"load cycle at {round(pressure_kpa):d} kPa\nspecimen {specimen}, run {run}"
         else:
-            title = title.replace(": ", "\n", 1)
+            title = title.split("\n")[0].replace(": ", "\n", 1)
+        if panel["discrepancy_sd"]:
+            title += f" (+ misfit sd {panel['discrepancy_sd']:.3g})"
         out.append({**panel, "x": x, "xlabel": xlabel, "title": title})
     return out
 
@@ -209,7 +222,10 @@ def material_figures(result_dir: str | Path, dataset=None) -> list[Path]:
             )
             ax.legend(loc="lower right", frameon=False)
             written += save(fig, result_dir / "figures" / "step")
-    panels = predictive_runs(idata)
+    from ..analysis.metrics import result_discrepancy
+
+    discrepancy = result_discrepancy(result_dir)
+    panels = predictive_runs(idata, discrepancy)
     with plt.rc_context(plots.STYLE):
         fig, axes = plt.subplots(1, len(panels), figsize=(3.2 * len(panels), 2.8), squeeze=False)
         for ax, p in zip(axes[0], panels, strict=True):
@@ -227,7 +243,7 @@ def material_figures(result_dir: str | Path, dataset=None) -> list[Path]:
         fig.legend(handles, labels, loc="lower center", ncol=3, bbox_to_anchor=(0.5, -0.16), frameon=False)
         fig.suptitle(f"{code}: bin means of the data over the posterior predictive", y=1.02)
         written += save(fig, result_dir / "figures" / "predictive")
-        responses = response_runs(idata)
+        responses = response_runs(idata, discrepancy)
         if responses:
             fig, axes = plt.subplots(
                 2, len(responses), figsize=(3.4 * len(responses), 4.4), squeeze=False,
@@ -394,7 +410,8 @@ def cross_material_figures(out_dir: str | Path, results: dict, metrics: dict, ra
             fig, ax = plt.subplots(figsize=(1.0 * len(codes) + 3.0, 0.45 * len(criteria) + 1.2))
             rows = [c + (" (prior only)" if ranking["criteria"][c].get("from_prior") else "") for c in criteria]
             plots.probability_heatmap(
-                ax, matrix, rows, codes, title="P(best) per criterion", colorbar_label="P(best) [-]"
+                ax, matrix, rows, codes, title=f"P(best within {100 * ranking.get('margin', 0.05):g} %) per criterion",
+                colorbar_label="P(best) [-]",
             )
             written += save(fig, out_dir / "figures" / "ranking")
     return written

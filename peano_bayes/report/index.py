@@ -275,7 +275,7 @@ def index_markdown(
         if m:
             code = s["material"]
             lines += [
-                f"Table 3 metrics: posterior predictive median and 94 % HDI over {m['n_draws']} draws "
+                f"Table 3 metrics: posterior predictive median and 94 % HDI over {m['draws']} draws "
                 f"({m['n_failed']} failed to simulate), beside the paper's values:",
                 "",
                 metrics_markdown(code, m["summary"], m["published"]),

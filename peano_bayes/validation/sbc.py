@@ -271,12 +271,7 @@ def run_replicate(
     )
     draws = derived_levels(base, result.kept().reshape(-1, posterior.ndim), rng)
     truth = truth.ranked
-    thinned = draws[np.linspace(0, len(draws) - 1, RANK_DRAWS).round().astype(int)]
-    rank = (thinned < truth).sum(axis=0)
-    covered = {}
-    for level in LEVELS:
-        low, high = np.quantile(draws, [(1 - level) / 2, (1 + level) / 2], axis=0)
-        covered[str(level)] = ((truth >= low) & (truth <= high)).tolist()
+    rank, covered = rank_and_coverage(draws, truth)
     return Replicate(
         index,
         truth.tolist(),
@@ -315,6 +310,21 @@ def wilson_interval(k: int, n: int, confidence: float = 0.95) -> tuple[float, fl
     return float(ci.low), float(ci.high)
 
 
+def rank_and_coverage(draws: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, dict[str, list[bool]]]:
+    """The SBC statistics of one replicate: per quantity (draws (n, d), truth (d,)), the rank of the truth among
+    :data:`RANK_DRAWS` draws evenly spaced over ``draws`` (how many lie below it: uniform on 0..RANK_DRAWS for
+    a calibrated posterior with independent draws), and for each level of :data:`LEVELS` whether the truth lies
+    in the central interval of all the draws (``str(level)`` -> (d,) flags)."""
+    draws, truth = np.asarray(draws, float), np.asarray(truth, float)
+    thinned = draws[np.linspace(0, len(draws) - 1, RANK_DRAWS).round().astype(int)]
+    rank = (thinned < truth).sum(axis=0)
+    covered = {}
+    for level in LEVELS:
+        low, high = np.quantile(draws, [(1 - level) / 2, (1 + level) / 2], axis=0)
+        covered[str(level)] = ((truth >= low) & (truth <= high)).tolist()
+    return rank, covered
+
+
 def coverage_table(replicates: list[dict], names) -> list[dict]:
     """Per parameter: coverage of each central interval with its 95 % Wilson interval, and the chi-square
     p-value of the rank histogram (10 bins) against uniform."""
@@ -335,6 +345,7 @@ def coverage_table(replicates: list[dict], names) -> list[dict]:
 
 
 __all__ = [
+    "rank_and_coverage",
     "LEVELS",
     "RANK_DRAWS",
     "SBC_FREE",

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from ... import bundled
+from ...defaults import DEFAULT_DRAWS
 from ...errors import PeanoBayesInputError
 from .registry import _DATA_HELP, _PRESSURE_HELP, _pressure_kpa, _seed, _writable_folder, command
 
@@ -71,9 +72,9 @@ def metrics_command(args):
         progress=not args.no_progress,
         test_pressure_kpa=_pressure_kpa(args.pressure_kpa),
     )
-    print(f"{out['material']}: {out['n_draws']} posterior draws ({out['n_failed']} failed to simulate)")
+    print(f"{out['material']}: {out['draws']} posterior draws ({out['n_failed']} failed to simulate)")
     if out["n_failed"]:
-        print(f"peano-bayes metrics: WARNING: {_failed_draws(out['n_failed'], out['n_draws'])}", file=sys.stderr)
+        print(f"peano-bayes metrics: WARNING: {_failed_draws(out['n_failed'], out['draws'])}", file=sys.stderr)
     print(metrics_markdown(out["material"], out["summary"], out["published"]))
     if out["prior_only"]:
         print(f"not informed by the fitted tests, drawn from the prior: {', '.join(out['prior_only'])}")
@@ -84,7 +85,7 @@ def metrics_command(args):
             "fitted model; the free strain, energy and hysteresis most, since the rig's load cycles run at 0 kPa "
             "and the test pressure only"
         )
-    return {k: v for k, v in out.items() if k != "draws"}
+    return {k: v for k, v in out.items() if k != "draw_values"}
 
 
 def _failed_draws(n_failed: int, n_drawn: int) -> str:
@@ -96,7 +97,9 @@ def _failed_draws(n_failed: int, n_drawn: int) -> str:
 
 def _metrics_arguments(p):
     p.add_argument("result", metavar="RESULT", help="a result directory of 'peano-bayes fit' (or its posterior.nc)")
-    p.add_argument("--draws", type=int, default=100, help="posterior draws simulated (default: 100)")
+    p.add_argument(
+        "--draws", type=int, default=DEFAULT_DRAWS, help=f"posterior draws simulated (default: {DEFAULT_DRAWS})"
+    )
     p.add_argument(
         "--seed",
         type=_seed,
@@ -143,7 +146,7 @@ def rank_command(args):
     prior_only = {name for m in metrics for name, s in m.get("summary", {}).items() if s.get("from_prior")}
     pressures = {m["material"]: m.get("test_pressure_kpa") for m in metrics}
     own = {m["material"]: m.get("own_test_pressure_kpa", m.get("test_pressure_kpa")) for m in metrics}
-    draws = {m["material"]: m["draws"] for m in metrics}
+    draws = {m["material"]: m["draw_values"] for m in metrics}
     if len(metrics) == 1:
         print("peano-bayes rank: WARNING: one result: it is best in every criterion by definition", file=sys.stderr)
     failed = failed_draw_counts({m["material"]: m for m in metrics})

@@ -1,0 +1,171 @@
+"""Recovery when the shape constants the fit holds are not the ones that made the data (issue: answers a lab can
+act on, item 5).
+
+    python experiments/recovery_drawn_constants.py --out DIR [--arms held sampled] [--jobs 2]
+    python experiments/recovery_drawn_constants.py --out DIR --analyse
+
+Pre-registered (written before any row existed): materials TP, PR, PC and FC; seeds 7101, 7102 and 7103 each
+(fresh: no dataset, fit or study used them). Per (material, seed): the material's generating parameters
+(``true_parameters.toml``) with the three shape constants a fit holds by default (``length_fraction``,
+``bending_exponent``, ``extension_rate``: :data:`~peano_bayes.inference.posterior.DEFAULT_HELD`, where the
+material's model reads them) replaced by one draw each from the material's own prior (the draw's generator is
+seeded by the seed), data from the virtual rig as the bundled files were made (two specimens, three repeats, the
+four tests, the bundled noise), then ``fit`` as a user runs it: the defaults (the three quasi-static tests, the
+bundled prior of the material), no discovery. Arm ``held``: the default fit, constants held at nominal. Arm
+``sampled``: ``--sample-all``, the constants sampled too. Scored: every population physics parameter the fit
+sampled (not noise scales, the spread or contrasts; in ``sampled`` also the constants themselves), inside its
+94 % HDI or not; only converged fits count, unconverged ones are listed. Target: >= 90 % of the population
+generating values inside, pooled over materials and seeds, per arm.
+
+Each finished fit appends one JSON row to ``DIR/rows.jsonl`` (atomically: the row is written whole or not at
+all); a restarted run skips the rows present, so the study may span sessions. ``--analyse`` reads the rows and
+prints the pooled figures, the last line one JSON object; it refuses while rows are missing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tomllib
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+MATERIALS = ("TP", "PR", "PC", "FC")
+SEEDS = (7101, 7102, 7103)
+ARMS = ("held", "sampled")
+TARGET = 0.90
+NOT_PHYSICS = ("noise_", "specimen_")
+
+
+def _generating(code: str) -> tuple[dict, object, tuple]:
+    from peano_bayes.bundled import DATA_DIR
+    from peano_bayes.physics import ModelConfig
+
+    entry = tomllib.loads((DATA_DIR / "true_parameters.toml").read_text())[code]
+    fields = {k[len("config_") :]: v for k, v in entry.items() if k.startswith("config_")}
+    fields.pop("series_creep", None)
+    return dict(entry["parameters"]), ModelConfig(**fields), tuple(entry.get("quirks", ()))
+
+
+def drawn_truth(code: str, seed: int) -> tuple[dict, dict, object, tuple]:
+    """The generating parameters of one dataset, the constants drawn, the model and the rig's quirks."""
+    from peano_bayes.inference.posterior import DEFAULT_HELD
+    from peano_bayes.inference.prior_files import prior_for
+    from peano_bayes.rig import apply_quirks
+
+    params, config, quirks = _generating(code)
+    prior = prior_for(code)
+    reads = apply_quirks(config, quirks).parameter_names()
+    rng = np.random.default_rng([seed, 5, MATERIALS.index(code)])  # its own draw per material and seed
+    drawn = {n: float(prior.marginals[n].sample(rng, 1)[0]) for n in DEFAULT_HELD if n in reads}
+    return {**params, **drawn}, drawn, config, quirks
+
+
+def run_row(code: str, seed: int, arm: str, out: str) -> dict:
+    """One fit of the study, scored (see the module docstring)."""
+    import arviz as az
+
+    from peano_bayes.app.pipeline import infer
+    from peano_bayes.data import save
+    from peano_bayes.defaults import HDI_PROB
+    from peano_bayes.inference.results import load_result, result_config
+    from peano_bayes.rig import RigSimulationError, simulate_dataset
+
+    params, drawn, config, quirks = drawn_truth(code, seed)
+    folder = Path(out) / "data"
+    folder.mkdir(parents=True, exist_ok=True)
+    data = folder / f"{code}_{seed}.csv"
+    if not data.exists():
+        try:
+            save(simulate_dataset(code, params, config=config, quirks=quirks, seed=seed), data)
+        except RigSimulationError as err:  # counted, not dropped: the row says why there is no fit
+            return {"material": code, "seed": seed, "arm": arm, "drawn": drawn, "converged": False,
+                    "error": f"the virtual rig could not simulate these constants: {err}", "steps": 0,
+                    "seconds": 0.0, "parameters": {}}  # fmt: skip
+    label = f"{code}_{seed}_{arm}"
+    summary = infer(
+        data, Path(out) / "fits", label=label, seed=seed, sample_all=arm == "sampled", progress=False,
+        figures=False, log=lambda m: print(f"{label}: {m}", flush=True),
+        resume=(Path(out) / "fits" / label / "sampler_state.npz").exists(),
+    )  # fmt: skip
+    idata = load_result(Path(out) / "fits" / label)
+    nominal = result_config(idata).nominal_parameters()
+    scored = {}
+    for name in summary["parameters"]:
+        if name.startswith(NOT_PHYSICS) or name not in idata.posterior:
+            continue
+        value = float(params.get(name, nominal.get(name, np.nan)))
+        low, high = (float(v) for v in az.hdi(idata.posterior[name].values.reshape(-1), hdi_prob=HDI_PROB))
+        scored[name] = {"truth": value, "low": low, "high": high, "inside": bool(low <= value <= high)}
+    return {
+        "material": code, "seed": seed, "arm": arm, "drawn": drawn,
+        "converged": bool(summary["convergence"]["converged"]), "steps": summary["steps"],
+        "seconds": sum(summary["timings_s"].values()), "parameters": scored,
+    }  # fmt: skip
+
+
+def _append(path: Path, row: dict) -> None:
+    """One row appended whole: written to a temporary file, then the file is replaced by old + row."""
+    text = (path.read_text() if path.exists() else "") + json.dumps(row) + "\n"
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def analyse(rows: list[dict]) -> dict:
+    out = {}
+    for arm in sorted({r["arm"] for r in rows}):
+        mine = [r for r in rows if r["arm"] == arm]
+        counted = [r for r in mine if r["converged"]]
+        inside = sum(p["inside"] for r in counted for p in r["parameters"].values())
+        total = sum(len(r["parameters"]) for r in counted)
+        misses = [f"{r['material']}/{r['seed']}/{n}" for r in counted for n, p in r["parameters"].items()
+                  if not p["inside"]]  # fmt: skip
+        out[arm] = {
+            "inside": inside, "total": total, "fraction": inside / total if total else None,
+            "target_met": bool(total and inside / total >= TARGET), "misses": misses,
+            "unconverged": [f"{r['material']}/{r['seed']}" for r in mine if not r["converged"]],
+            "errors": {f"{r['material']}/{r['seed']}": r["error"] for r in mine if r.get("error")},
+            "median_seconds": float(np.median([r["seconds"] for r in mine])),
+        }  # fmt: skip
+    return out
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--out", required=True, type=Path, help="the study's folder (rows.jsonl, data, fits)")
+    parser.add_argument("--arms", nargs="+", choices=ARMS, default=list(ARMS))
+    parser.add_argument("--jobs", type=int, default=1, help="fits at once (one core each)")
+    parser.add_argument("--analyse", action="store_true", help="analyse the rows (all must be in)")
+    args = parser.parse_args()
+    args.out.mkdir(parents=True, exist_ok=True)
+    rows_path = args.out / "rows.jsonl"
+    rows = [json.loads(line) for line in rows_path.read_text().splitlines()] if rows_path.exists() else []
+    done = {(r["material"], r["seed"], r["arm"]) for r in rows}
+    plan = [(c, s, a) for a in args.arms for c in MATERIALS for s in SEEDS if (c, s, a) not in done]
+    if args.analyse:
+        if plan:
+            print(f"{len(plan)} rows missing: {plan}", file=sys.stderr)
+            return 2
+        result = analyse(rows)
+        for arm, r in result.items():
+            print(f"{arm}: {r['inside']} of {r['total']} inside ({r['fraction']:.3f}); misses {r['misses']}")
+        print(json.dumps(result))
+        return 0
+    print(f"{len(done)} rows present, {len(plan)} to run", flush=True)
+    with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+        futures = {pool.submit(run_row, c, s, a, str(args.out)): (c, s, a) for c, s, a in plan}
+        for future, key in futures.items():
+            row = future.result()
+            _append(rows_path, row)
+            inside = sum(p["inside"] for p in row["parameters"].values())
+            print(f"row {key}: {inside} of {len(row['parameters'])} inside, converged {row['converged']}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
