@@ -301,3 +301,20 @@ def test_the_operating_force_is_the_hand_solved_ideal_muscle_force_when_nothing_
     assert [c["probability"] for c in report["candidates"]] == [1.0, 1.0]  # 15 mm: 10.0-12.5 N, 20 mm: 13.4-16.7 N
     assert 0.0 < report["candidates"][1]["p_force_with_margin"] < 1.0
     assert report["draws"] == {"TP": n} and report["margin"] == 0.05
+
+
+def test_the_top_candidate_is_recommended_only_when_it_clears_the_next_by_two_standard_errors():
+    from peano_bayes.analysis.recommend import recommended
+
+    def cand(p, se, infeasible=()):
+        return {"probability": p, "probability_se": se, "infeasible": list(infeasible)}
+
+    # 0.95 +- 0.007 against 0.90 +- 0.009: a difference of 0.05 against 2 x 0.0114
+    assert recommended([cand(0.95, 0.007), cand(0.90, 0.009)]) == {"verdict": "recommended", "candidates": [0]}
+    # 0.95 against 0.94 (+- 0.0075): within two standard errors of the difference, tied
+    assert recommended([cand(0.95, 0.007), cand(0.94, 0.0075), cand(0.5, 0.016)]) == {
+        "verdict": "tied", "candidates": [0, 1]
+    }
+    # an infeasible candidate is never in the comparison; nothing meeting the requirement recommends nothing
+    assert recommended([cand(0.0, 0.0, ["above"]), cand(0.6, 0.015)])["candidates"] == [1]
+    assert recommended([cand(0.0, 0.0), cand(0.0, 0.0)]) == {"verdict": "none", "candidates": []}

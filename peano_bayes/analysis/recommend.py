@@ -528,9 +528,10 @@ def recommended(candidates: list[dict]) -> dict:
     "none", "candidates": [indices]}``. *Recommended* when it is feasible and its probability exceeds every other
     feasible candidate's by more than :data:`~peano_bayes.analysis.ranking.SE_CLEARANCE` standard errors of the
     difference (taken as independent: conservative for two geometries of one material, whose draws are shared);
-    *tied* naming the candidates within that of it; *none* when no candidate is feasible."""
+    *tied* naming the candidates within that of it; *none* when no feasible candidate meets the requirement in
+    any draw."""
     feasible = [i for i, c in enumerate(candidates) if not c["infeasible"]]
-    if not feasible:
+    if not feasible or candidates[feasible[0]]["probability"] == 0.0:
         return {"verdict": "none", "candidates": []}
     top = candidates[feasible[0]]
     tied = [
@@ -683,10 +684,11 @@ def recommendation_markdown(report: dict, top: int = 10) -> str:
     tied = verdict.get("candidates", [])[1:]
     lead = []
     if verdict.get("verdict") == "tied":
+        named = ", ".join(str(i + 1) for i in tied[:8]) + (f" and {len(tied) - 8} more" if len(tied) > 8 else "")
         lead = [
-            f"**No single recommendation**: candidate{'s' if len(tied) > 1 else ''} "
-            f"{', '.join(str(i + 1) for i in tied)} {'are' if len(tied) > 1 else 'is'} within {SE_CLEARANCE:g} Monte "
-            "Carlo standard errors of the first: more draws or the other requirements decide between them.",
+            f"**No single recommendation**: candidate{'s' if len(tied) > 1 else ''} {named} "
+            f"{'are' if len(tied) > 1 else 'is'} within {SE_CLEARANCE:g} Monte Carlo standard errors of the first: "
+            "more draws or the other requirements decide between them.",
             "",
         ]
     extra = [f"Infeasible: {code}: {'; '.join(reasons)}." for code, reasons in refused.items()]
