@@ -1,7 +1,7 @@
 """Simulation-based calibration of the inference chain: coverage table and rank histograms.
 
     python experiments/sbc.py [--replicates 100] [--out OUT] [--seed 20261123] [--walkers 16]
-                              [--exact-inputs] [--specimens N]
+                              [--exact-inputs] [--specimens N] [--as-fit]
                               [--jobs N | --scheduler local:N | --scheduler tcp://HOST:8786]
 
 Each replicate draws parameters from the prior, runs the virtual rig with them and infers them with the same
@@ -14,8 +14,9 @@ ordered by replicate index, so it is the same however the replicates were spread
 same study with noiseless strain and pressure sensors (a control: the likelihood treats the denoised inputs as
 exact, so the gap between the two studies' coverage is what the inputs' fitting error costs). ``--specimens 2``
 runs the hierarchical study: two specimens with their own values, the spread and contrasts sampled, and the
-population and new-specimen levels ranked beside theta. Target: 90 %
-intervals cover 85-95 % of the truths. The last line printed is one JSON object.
+population and new-specimen levels ranked beside theta. ``--as-fit`` infers as ``peano-bayes fit`` does: the
+mode search from the multi-start least squares, the default walkers, adaptive warm-up, chunks and convergence
+rule. Target: 90 % intervals cover 85-95 % of the truths. The last line printed is one JSON object.
 """
 
 from __future__ import annotations
@@ -45,15 +46,19 @@ from peano_bayes.validation.sbc import (
 TARGET = (0.85, 0.95)
 
 
-def load_done(path: Path, seed: int, exact_inputs: bool = False, specimens: int = 1) -> dict[int, dict]:
-    """Finished replicates of the study (``seed``, ``exact_inputs``, ``specimens``) in ``path``, by index."""
+def load_done(
+    path: Path, seed: int, exact_inputs: bool = False, specimens: int = 1, as_fit: bool = False
+) -> dict[int, dict]:
+    """Finished replicates of the study (``seed``, ``exact_inputs``, ``specimens``, ``as_fit``) in ``path``, by
+    index."""
     done = {}
     if path.exists():
         for line in path.read_text().splitlines():
             if line.strip():
                 row = json.loads(line)
-                same = (row.get("seed"), row.get("exact_inputs", False), row.get("specimens", 1))
-                if same == (seed, exact_inputs, specimens):
+                key = ("seed", "exact_inputs", "specimens", "as_fit")
+                same = tuple(row.get(k, default) for k, default in zip(key, (None, False, 1, False), strict=True))
+                if same == (seed, exact_inputs, specimens, as_fit):
                     done[row["index"]] = row
     return done
 
@@ -66,7 +71,13 @@ def append_line(path: Path, row: dict) -> None:
 
 
 def markdown(
-    rows: list[dict], replicates: list[dict], seed: int, seconds: float, exact_inputs: bool = False, specimens: int = 1
+    rows: list[dict],
+    replicates: list[dict],
+    seed: int,
+    seconds: float,
+    exact_inputs: bool = False,
+    specimens: int = 1,
+    as_fit: bool = False,
 ) -> str:
     n = len(replicates)
     converged = sum(r["converged"] for r in replicates)
@@ -83,8 +94,13 @@ def markdown(
         f"{n} replicates (root seed {seed}), TP load cycles, three free physics parameters and the load cell's "
         f"noise scale{hierarchy} (`peano_bayes.validation.sbc`). Each replicate: truth from the prior, data from the "
         f"virtual rig{' with noiseless strain and pressure sensors (exact inputs)' if exact_inputs else ''}, "
-        f"posterior-mode start from the prior median, emcee to the convergence gates "
-        f"({converged} of {n} converged; the rest stopped at the step limit and are counted as they are; "
+        + (
+            "posterior-mode start from the multi-start least squares and emcee with `peano-bayes fit`'s defaults "
+            "(walkers, adaptive warm-up, chunks) to its convergence rule "
+            if as_fit
+            else "posterior-mode start from the prior median, emcee to the convergence gates "
+        )
+        + f"({converged} of {n} converged; the rest stopped at the step limit and are counted as they are; "
         f"{sum(bool(r.get('ar1')) for r in replicates)} sampled with AR(1) residuals because their residuals at "
         "the mode failed the structure check). "
         f"Coverage: fraction of truths inside the central interval of the posterior draws, with 95 % Wilson "
@@ -133,6 +149,12 @@ def main(argv=None) -> int:
     parser.add_argument("--max-steps", type=int, default=4000)
     parser.add_argument("--exact-inputs", action="store_true", help="noiseless strain and pressure sensors")
     parser.add_argument("--specimens", type=int, default=1, help="specimens per replicate (2+: the hierarchy)")
+    parser.add_argument(
+        "--as-fit",
+        action="store_true",
+        help="start and sample as 'peano-bayes fit' does: least squares, the default walkers, adaptive warm-up, "
+        "chunks and convergence rule (--walkers is then ignored)",
+    )
     parser.add_argument("--jobs", type=int, default=1, help="local worker processes (default 1: this process)")
     parser.add_argument("--scheduler", default=None, help="Dask scheduler: local:N or tcp://HOST:8786")
     args = parser.parse_args(argv)
@@ -144,7 +166,7 @@ def main(argv=None) -> int:
         return 2
     args.out.mkdir(parents=True, exist_ok=True)
     lines = args.out / "replicates.jsonl"
-    done = load_done(lines, args.seed, args.exact_inputs, args.specimens)
+    done = load_done(lines, args.seed, args.exact_inputs, args.specimens, args.as_fit)
     t0 = time.perf_counter()
     todo = [i for i in range(args.replicates) if i not in done]
     if done:
@@ -152,6 +174,8 @@ def main(argv=None) -> int:
     settings = dict(seed=args.seed, n_walkers=args.walkers, max_steps=args.max_steps, exact_inputs=args.exact_inputs)
     if args.specimens > 1:
         settings["specimens"] = args.specimens
+    if args.as_fit:
+        settings["as_fit"] = True
     units = [Unit(f"replicate {i}", replicate_unit, (i,), settings) for i in todo]
 
     def finished(outcome):
@@ -177,7 +201,10 @@ def main(argv=None) -> int:
     seconds = time.perf_counter() - t0 + sum(r["seconds"] for r in replicates if r["index"] not in todo)
     flat = [{k: (json.dumps(v) if isinstance(v, list) else v) for k, v in row.items()} for row in rows]
     write_text(args.out / "coverage.csv", pd.DataFrame(flat).to_csv(index=False))
-    write_text(args.out / "SBC.md", markdown(rows, replicates, args.seed, seconds, args.exact_inputs, args.specimens))
+    write_text(
+        args.out / "SBC.md",
+        markdown(rows, replicates, args.seed, seconds, args.exact_inputs, args.specimens, args.as_fit),
+    )
     rank_figure(replicates, names, args.out / "ranks")
     print((args.out / "SBC.md").read_text())
     summary = {

@@ -31,12 +31,13 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import stats
 
+from ..defaults import DEFAULT_CHUNK, DEFAULT_STARTS, DEFAULT_WARMUP
 from ..errors import PeanoBayesInputError
-from ..inference.driver import posterior_at_mode
+from ..inference.driver import least_squares, posterior_at_mode, walker_start
 from ..inference.posterior import SPECIMEN_SD, Posterior, build_posterior, helmert
 from ..inference.prior_files import prior_for
 from ..inference.reduce import INPUT_ERROR_TESTS, prepare
-from ..inference.sample import sample
+from ..inference.sample import sample, walker_count
 from ..physics import DEFAULT_CONFIG
 from ..rig import RigNoise, RigSimulationError, simulate_dataset
 
@@ -242,20 +243,33 @@ def run_replicate(
     chunk: int = 250,
     max_steps: int = 4000,
     exact_inputs: bool = False,
+    as_fit: bool = False,
 ) -> Replicate:
     """Replicate ``index`` of the study with root ``seed``: truth and rig data from :func:`replicate_data`,
     inference from the prior median (never the truth), ranks and coverage of every quantity of
-    :func:`rank_names`."""
+    :func:`rank_names`.
+
+    ``as_fit``: the inference ``peano-bayes fit`` runs instead: the mode search starts from the multi-start
+    least squares (:func:`~peano_bayes.inference.driver.least_squares`, the fit's starts, seeded by ``index``)
+    and :func:`~peano_bayes.inference.driver.walker_start`, and the sampler takes the fit's defaults (walkers
+    :func:`~peano_bayes.inference.sample.walker_count`, the adaptive warm-up, its chunks and convergence rule);
+    ``n_walkers``, ``warmup`` and ``chunk`` are then ignored."""
     t0 = time.perf_counter()
     truth, data, redraws, rng = replicate_data(base, index, seed=seed, exact_inputs=exact_inputs)
     try:  # same protocol: reuse the compiled log posterior
         posterior = base.with_observations(prepare(data))
     except ValueError:  # the replicate's inputs were cut into other segments (other bin shapes): its own
         posterior = replace(base, observations=prepare(data))
-    start, spread = mode_start(base)
+    if as_fit:
+        fitted = least_squares(posterior, posterior.prior, n_starts=DEFAULT_STARTS, seed=index)
+        start, covariance = walker_start(posterior, fitted)
+        n_walkers, warmup, chunk = walker_count(None, posterior.ndim), DEFAULT_WARMUP, DEFAULT_CHUNK
+    else:
+        start, spread = mode_start(base)
+        covariance = np.diag(spread**2)
     posterior = posterior.with_batch_rows(n_walkers // 2)  # the sampler's batch size: one compilation
     # the driver's own stages from a start to the sampler, as peano-bayes fit runs them (AR(1) residuals included)
-    mode = posterior_at_mode(posterior, start, np.diag(spread**2))
+    mode = posterior_at_mode(posterior, start, covariance)
     posterior, ar1 = mode.posterior, mode.lag1
     result = sample(
         posterior,
@@ -302,6 +316,7 @@ def replicate_unit(index: int, *, seed: int, **settings) -> dict:
     rep = run_replicate(base, index, seed=seed, **settings)
     exact_inputs = settings.get("exact_inputs", False)
     row = {"seed": seed, "exact_inputs": exact_inputs, "names": list(rank_names(base)), **rep.as_dict()}
+    row = {"as_fit": True, **row} if settings.get("as_fit") else row
     return row if specimens == 1 else {"specimens": specimens, **row}
 
 
