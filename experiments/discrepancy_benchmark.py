@@ -39,12 +39,12 @@ import pandas as pd
 from peano_bayes import enable_compilation_cache
 from peano_bayes.app.fanout import Unit, make_executor, run_units
 from peano_bayes.atomic import write_text
+from peano_bayes.effects import hideable
 from peano_bayes.errors import PeanoBayesInputError
 from peano_bayes.validation.discovery_benchmark import (
     TWO_MOUNTS,
     Case,
     failed_row,
-    hideable_names,
     not_hideable,
     run_case,
     run_key,
@@ -57,7 +57,7 @@ TWO_EFFECTS = ("hysteresis", "flow_restriction")
 
 
 CASE_LABELS = (
-    *hideable_names(),
+    *hideable(),
     "none",
     "drift",
     "+".join(TWO_EFFECTS),
@@ -69,7 +69,7 @@ CASE_LABELS = (
 
 def cases(snrs, noise_levels, only=None) -> list[Case]:
     """Every case, or those whose label is in ``only`` (``none`` covers every noise level)."""
-    out = [Case((e,), snr) for snr in snrs for e in hideable_names()]
+    out = [Case((e,), snr) for snr in snrs for e in hideable()]
     out += [Case(force_sd_n=sd) for sd in noise_levels]
     out += [Case(drift=True), Case(TWO_EFFECTS, max(snrs))]
     out += [Case(physics="veale")]  # the null on another physics: Veale's force-balance model

@@ -43,7 +43,8 @@ from peano_bayes.discovery import discovery_data
 from peano_bayes.discovery.fitting import evaluate, fit_models
 from peano_bayes.discovery.model import DEFAULT_BASE
 from peano_bayes.discovery.workflow import BASE_CONTINUATIONS, Discovery, Gates, fit_base
-from peano_bayes.validation.discovery_benchmark import hidden_dataset, hideable_names, run_key, true_model, truth_gap
+from peano_bayes.effects import hideable
+from peano_bayes.validation.discovery_benchmark import hidden_dataset, run_key, true_model, truth_gap
 
 HERE = Path(__file__).resolve().parent
 TARGET = 0.5
@@ -140,7 +141,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--run", required=True, help="a discovery benchmark run's folder (runs*.jsonl, strengths.json)")
     parser.add_argument(
-        "--effects", nargs="+", default=None, choices=hideable_names(), metavar="EFFECT",
+        "--effects", nargs="+", default=None, choices=tuple(hideable()), metavar="EFFECT",
         help="default: every detected one",
     )
     parser.add_argument("--per-effect", type=int, default=8, help="rows per effect, misses of the target first")

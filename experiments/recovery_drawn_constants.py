@@ -28,11 +28,11 @@ import argparse
 import json
 import os
 import sys
-import tomllib
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
+from free_strain_truth import generating
 
 MATERIALS = ("TP", "PR", "PC", "FC")
 SEEDS = (7101, 7102, 7103)
@@ -41,23 +41,13 @@ TARGET = 0.90
 NOT_PHYSICS = ("noise_", "specimen_")
 
 
-def _generating(code: str) -> tuple[dict, object, tuple]:
-    from peano_bayes.bundled import DATA_DIR
-    from peano_bayes.physics import ModelConfig
-
-    entry = tomllib.loads((DATA_DIR / "true_parameters.toml").read_text())[code]
-    fields = {k[len("config_") :]: v for k, v in entry.items() if k.startswith("config_")}
-    fields.pop("series_creep", None)
-    return dict(entry["parameters"]), ModelConfig(**fields), tuple(entry.get("quirks", ()))
-
-
 def drawn_truth(code: str, seed: int) -> tuple[dict, dict, object, tuple]:
     """The generating parameters of one dataset, the constants drawn, the model and the rig's quirks."""
     from peano_bayes.inference.posterior import DEFAULT_HELD
     from peano_bayes.inference.prior_files import prior_for
     from peano_bayes.rig import apply_quirks
 
-    params, config, quirks = _generating(code)
+    params, config, quirks = generating(code)
     prior = prior_for(code)
     reads = apply_quirks(config, quirks).parameter_names()
     rng = np.random.default_rng([seed, 5, MATERIALS.index(code)])  # its own draw per material and seed

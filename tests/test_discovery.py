@@ -46,6 +46,7 @@ from peano_bayes.effects import (
     CONFUSABLE,
     EXTRA_PARAMETERS,
     flexible_terms,
+    hideable,
     noise_effects,
     physics_effects,
 )
@@ -57,7 +58,6 @@ from peano_bayes.validation.discovery_benchmark import (
     TRUTH_PARAMS,
     Case,
     hidden_dataset,
-    hideable_names,
     run_case,
     run_key,
     score,
@@ -391,7 +391,7 @@ def test_the_harness_hides_each_effect_in_that_effects_own_parameters_away_from_
     """What the identifiability probe fits as the truth: the rig's parameters, with only the hidden effect's
     parameters changed, and its strength parameters not at the library's off value."""
     assert true_parameters((), {}) == dict(TRUTH_PARAMS)
-    for effect in hideable_names():
+    for effect in hideable():
         truth = true_parameters((effect,), {effect: 1.5})
         changed = {k for k in truth if truth[k] != TRUTH_PARAMS.get(k)}
         assert changed and changed <= set(LIBRARY[effect].params), (effect, changed)

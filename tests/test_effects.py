@@ -15,6 +15,7 @@ from peano_bayes.effects import (
     adopt,
     check_effects,
     effects_in,
+    hideable,
     physics_effects,
     register,
     registered,
@@ -24,7 +25,7 @@ from peano_bayes.effects import (
 from peano_bayes.errors import PeanoBayesInputError
 from peano_bayes.physics import DEFAULT_CONFIG, ModelConfig
 from peano_bayes.rig import QUIRKS, apply_quirks, check_quirks
-from peano_bayes.validation.discovery_benchmark import hideable_names, not_hideable
+from peano_bayes.validation.discovery_benchmark import not_hideable
 
 #: A toy effect: a second Maxwell branch across the tubes (an element the physics has, that no registered
 #: effect switches on).
@@ -60,13 +61,13 @@ def test_a_toy_effect_registered_in_one_place_reaches_the_rig_superset_discovery
         # the model a fit samples when discovery names it
         assert name in effects_in(adopt(DEFAULT_CONFIG, [name]))
         # a physics effect to discovery's naming rule and the model choice; the validation benchmark can hide it
-        assert name in physics_effects() and name in hideable_names() and name not in not_hideable()
+        assert name in physics_effects() and name in hideable() and name not in not_hideable()
         assert choice_from_report(DEFAULT_CONFIG, {"named": [name]}, None).adopted == (name,)
         # the report reads its kind from the registry
         text = report_markdown(_report_screening(name))
         assert f"`{name}` (physics)" in text
     assert name not in LIBRARY and name not in QUIRKS and superset_config().parallel_maxwell == 1
-    assert name not in physics_effects() and name not in hideable_names()
+    assert name not in physics_effects() and name not in hideable()
     with pytest.raises(PeanoBayesInputError, match="unknown effect"):
         check_effects([name])
 

@@ -84,7 +84,12 @@ def limit_violations(
     """Why a material cannot be used at ``max_pressure_pa``: above its highest tested pressure or a known burst
     pressure (:func:`material_limits` of ``code``, its result ``idata`` and a stated ``burst_kpa``); empty when
     it can. With no tested pressure known every pressure is refused: the posterior's validity there is unknown."""
-    limits = material_limits(code, idata, burst_kpa, stated_in)
+    return violations(code, max_pressure_pa, material_limits(code, idata, burst_kpa, stated_in))
+
+
+def violations(code: str, max_pressure_pa: float, limits: dict | None) -> list[str]:
+    """Why material ``code`` cannot be used at ``max_pressure_pa`` [Pa] under its ``limits``
+    (:func:`material_limits`); every pressure where they are ``None``."""
     kpa = max_pressure_pa / 1e3
     if limits is None:
         return [f"{kpa:g} kPa cannot be checked against the pressure {code} was tested at: none is known"]
@@ -101,4 +106,4 @@ def limit_violations(
     return reasons
 
 
-__all__ = ["design_limits", "limit_violations", "material_limits", "thickness_m", "wall_thickness_m"]
+__all__ = ["design_limits", "limit_violations", "material_limits", "thickness_m", "violations", "wall_thickness_m"]

@@ -44,29 +44,11 @@ PRACTICAL_MARGIN = 0.05
 AGREEMENT = 0.9
 #: Monte Carlo standard errors a probability must clear its threshold by before a verdict is given.
 SE_CLEARANCE = 2.0
-
-
-def mc_se(p: float, n: int) -> float:
-    """Monte Carlo standard error of a probability ``p`` estimated as the share of ``n`` independent draws."""
-    if n < 1 or not math.isfinite(p):
-        return math.nan
-    return math.sqrt(max(p * (1.0 - p), 0.0) / n)
-
-
-def verdict(p: float, se: float, threshold: float = AGREEMENT, *, fails: bool = True) -> str:
-    """``"holds"`` when ``p`` exceeds ``threshold`` by more than :data:`SE_CLEARANCE` standard errors,
-    ``"fails"`` (if ``fails``) when it is below ``1 - threshold`` by as much, else ``"undecided"``."""
-    if not (math.isfinite(p) and math.isfinite(se)):
-        return "undecided"
-    if p - SE_CLEARANCE * se >= threshold:
-        return "holds"
-    if fails and p + SE_CLEARANCE * se <= 1.0 - threshold:
-        return "fails"
-    return "undecided"
 STIFFNESS = "stiffness_at_minus_1.5pct_0kPa"
 #: The paper's free strains were read by extrapolating its load cycles to zero force: its orderings are checked
 #: against the same reading of the predicted cycles, while the ranking's criterion is the muscle's own free strain.
 PAPER_FREE_STRAIN = "free_strain_paper_reading"
+
 
 #: The paper's orderings (``published_orderings.csv``, by row) as checks (metric, a, relation, b), relation
 #: ``">"`` (a larger) or ``"="`` (about equal), each within :data:`PRACTICAL_MARGIN` (:func:`ordering_checks`).
@@ -94,6 +76,25 @@ PUBLISHED_ORDERINGS = [
     [("energy_per_pressure", "PCS", ">", b) for b in ("TPC", "PC", "FC")]
     + [("energy_per_pressure", "TPC", "=", "PC"), ("energy_per_pressure", "PC", "=", "FC")],
 ]
+
+
+def mc_se(p: float, n: int) -> float:
+    """Monte Carlo standard error of a probability ``p`` estimated as the share of ``n`` independent draws."""
+    if n < 1 or not math.isfinite(p):
+        return math.nan
+    return math.sqrt(max(p * (1.0 - p), 0.0) / n)
+
+
+def verdict(p: float, se: float, threshold: float = AGREEMENT, *, fails: bool = True) -> str:
+    """``"holds"`` when ``p`` exceeds ``threshold`` by more than :data:`SE_CLEARANCE` standard errors,
+    ``"fails"`` (if ``fails``) when it is below ``1 - threshold`` by as much, else ``"undecided"``."""
+    if not (math.isfinite(p) and math.isfinite(se)):
+        return "undecided"
+    if p - SE_CLEARANCE * se >= threshold:
+        return "holds"
+    if fails and p + SE_CLEARANCE * se <= 1.0 - threshold:
+        return "fails"
+    return "undecided"
 
 
 @dataclass(frozen=True)
@@ -172,7 +173,11 @@ def pareto_probability(draws: dict, materials=None, criteria=PARETO_CRITERIA) ->
     """code -> probability of being Pareto-optimal (no other material at least as good on every criterion and
     better on one) over ``criteria`` jointly."""
     materials = tuple(materials or draws)
-    x = _joint(draws, materials, tuple(criteria))  # (n, m, k), larger is better
+    return _pareto(_joint(draws, materials, tuple(criteria)), materials)
+
+
+def _pareto(x: np.ndarray, materials: tuple) -> dict[str, float]:
+    """:func:`pareto_probability` of joint draws ``x`` (n, m, k), oriented so larger is better."""
     geq = np.all(x[:, :, None, :] >= x[:, None, :, :], axis=-1)  # [d, i, j]: i >= j everywhere
     gt = np.any(x[:, :, None, :] > x[:, None, :, :], axis=-1)
     dominated = np.any(geq & gt, axis=1)  # some i dominates j
@@ -307,8 +312,8 @@ def rank_materials(
         }
     pareto_criteria = tuple(c for c in PARETO_CRITERIA if c not in left_out)
     try:
-        pareto = pareto_probability(draws, materials, pareto_criteria)
-        pareto_n = len(_joint(draws, materials, pareto_criteria))
+        joint = _joint(draws, materials, pareto_criteria)
+        pareto, pareto_n = _pareto(joint, materials), len(joint)
     except (ValueError, IndexError, KeyError):
         pareto, pareto_n = {}, 0
     orderings = [
@@ -336,13 +341,13 @@ def rank_materials(
 def ranking_markdown(report: dict) -> str:
     """Markdown of :func:`rank_materials`: per criterion P(best) and expected rank; the Pareto set; orderings."""
     materials = report["materials"]
-    margin = report.get("margin", PRACTICAL_MARGIN)
+    margin = report["margin"]
     lines = [
         "### Per criterion: P(best), P(clearly best) and expected rank (94 % interval)",
         "",
         f"*Best*: no material better than it by more than {100 * margin:g} % (the practical-equivalence margin; "
         f"several materials can be best together); *clearly best*: better than every other by more than "
-        f"{100 * margin:g} %. Each probability is over {report.get('draws', 'the')} joint posterior draws, "
+        f"{100 * margin:g} %. Each probability is over {report['draws']} joint posterior draws, "
         f"± its Monte Carlo standard error; a verdict needs the probability above {AGREEMENT:g} by more than "
         f"{SE_CLEARANCE:g} standard errors, else it is undecided.",
         "",
@@ -383,8 +388,7 @@ def ranking_markdown(report: dict) -> str:
     for criterion, r in report["criteria"].items():
         label = f"{criterion} ({'lower' if CRITERIA[criterion] < 0 else 'higher'} is better)"
         label += " (prior only: not fitted)" if r.get("from_prior") else ""
-        said = r.get("verdict", "undecided")
-        said = f"{said}: {', '.join(r['materials'])}" if r.get("materials") else said
+        said = f"{r['verdict']}: {', '.join(r['materials'])}" if r["materials"] else r["verdict"]
         cells = []
         for c in materials:
             low, high = r["rank_interval"][c]
@@ -401,9 +405,9 @@ def ranking_markdown(report: dict) -> str:
         lines += ["", f"### P(Pareto-optimal) over {', '.join(over)}", ""]
         lines.append("| " + " | ".join(materials) + " |")
         lines.append("|" + "---|" * len(materials))
-        se = report.get("pareto_se", {})
-        lines.append("| " + " | ".join(_with_se(report["pareto"][c], se.get(c, math.nan)) for c in materials) + " |")
-        likely = [c for c in materials if verdict(report["pareto"][c], se.get(c, 0.0), fails=False) == "holds"]
+        se = report["pareto_se"]
+        lines.append("| " + " | ".join(_with_se(report["pareto"][c], se[c]) for c in materials) + " |")
+        likely = [c for c in materials if verdict(report["pareto"][c], se[c], fails=False) == "holds"]
         lines += [
             "",
             f"Pareto-optimal with probability >= {AGREEMENT:g} (by more than {SE_CLEARANCE:g} standard errors): "
@@ -428,8 +432,9 @@ def ranking_markdown(report: dict) -> str:
             flag = " (prior only: not fitted)" if o.get("from_prior") else ""
             said = o.get("verdict", "")
             said = f"**{said}**" if said == "contradicts" else said
-            p = _with_se(o["probability"], o["se"]) if "se" in o else f"{o['probability']:.2f}"
-            lines.append(f"| {o['metric']}{flag} | {o['a']} {shown} {o['b']} | {p} | {said} |")
+            lines.append(
+                f"| {o['metric']}{flag} | {o['a']} {shown} {o['b']} | {_with_se(o['probability'], o['se'])} | {said} |"
+            )
     return "\n".join(lines)
 
 

@@ -54,7 +54,7 @@ from ..errors import PeanoBayesInputError
 from ..inference.posterior import SPECIMEN_SD
 from ..inference.reduce import SPECIMEN_SCALED
 from ..physics import Geometry, LoadCycle, scale_parameters, simulate_load_cycle
-from .limits import design_limits, limit_violations, material_limits, thickness_m, wall_thickness_m
+from .limits import design_limits, limit_violations, material_limits, thickness_m, violations, wall_thickness_m
 from .ranking import PRACTICAL_MARGIN, SE_CLEARANCE, mc_se
 from .spec import Requirement, Spec, load_spec
 
@@ -160,9 +160,10 @@ def evaluate_candidates(
     seed: int = 0,
     discrepancy: dict | None = None,
     log=print,
-) -> tuple[list[dict], list[str]]:
-    """Every candidate of ``spec`` over ``materials`` (code -> ``(idata, metrics or None)``), best first, and
-    the rig artefacts removed from the predictions (see the module docstring).
+) -> tuple[list[dict], list[str], dict]:
+    """Every candidate of ``spec`` over ``materials`` (code -> ``(idata, metrics or None)``), best first, the
+    rig artefacts removed from the predictions (see the module docstring) and each material's pressure limits
+    (:meth:`~peano_bayes.analysis.spec.Spec.limits`).
 
     Each candidate: ``material``, ``n_tubes``, ``tube_width_mm``, ``tube_length_mm``, ``probability`` of
     meeting every requirement (0 if infeasible), ``p_each`` (requirement -> probability it holds), ``margin``
@@ -179,7 +180,7 @@ def evaluate_candidates(
     from ..inference.results import parameter_draws, result_config
 
     req = spec.requirement
-    out, removed = [], []
+    out, removed, limits = [], [], {}
     for code, (idata, metrics) in materials.items():
         config = result_config(idata)
         paired = {}  # requirement -> (n,) metric draws, paired with the force draws by index
@@ -203,14 +204,15 @@ def evaluate_candidates(
         )
         removed += [f"{code}: {a}" for a in artefacts]
         reference = _result_geometry(idata)
-        infeasible = limit_violations(code, req.max_pressure_pa, idata, spec.burst_kpa.get(code), str(spec.source))
+        limits[code] = spec.limits(code, idata)
+        infeasible = violations(code, req.max_pressure_pa, limits[code])
         misfit_n = max((s for t, s in (discrepancy or {}).get(code, {}).items() if t in FORCE_TESTS), default=0.0)
         if misfit_n > 0:
             at_reference = operating_forces(
                 {k: jnp.asarray(v) for k, v in stacked.items()}, config, reference, req.max_pressure_pa, req.contraction
             )
-            limits = material_limits(code, idata, spec.burst_kpa.get(code), str(spec.source))
-            growth = 1.0 if limits is None else max(1.0, req.max_pressure_pa / (1e3 * limits["max_tested_kpa"]))
+            tested_pa = None if limits[code] is None else 1e3 * limits[code]["max_tested_kpa"]
+            growth = 1.0 if tested_pa is None else max(1.0, req.max_pressure_pa / tested_pa)
             z = np.random.default_rng([seed, 13]).standard_normal(len(param_sets))
         log(f"{code}: {len(param_sets)} posterior draws (new specimens) over the candidate geometries")
         for n, w, length in itertools.product(spec.n_tubes, spec.tube_width_m, spec.tube_length_m):
@@ -259,7 +261,7 @@ def evaluate_candidates(
                 )
             )
     out.sort(key=lambda c: (bool(c["infeasible"]), -c["probability"], -c["margin"]["force"]))
-    return out, removed
+    return out, removed, limits
 
 
 def _result_geometry(idata) -> Geometry:
@@ -361,7 +363,7 @@ def recommend(
         metrics = read_metrics(directory) if (directory / "metrics.json").exists() else None
         materials[code] = (load_result(directory), metrics)
         misfits[code] = result_discrepancy(directory)
-    candidates, removed = evaluate_candidates(
+    candidates, removed, limits = evaluate_candidates(
         spec, materials, mount_compliance_m_per_n=mount_compliance_m_per_n, seed=seed, discrepancy=misfits, log=log
     )
     notes = []
@@ -391,10 +393,7 @@ def recommend(
     return {
         "spec": str(spec.source),
         "requirement": spec.requirement.__dict__,
-        "limits": {
-            code: material_limits(code, idata, spec.burst_kpa.get(code), str(spec.source))
-            for code, (idata, _) in materials.items()
-        },
+        "limits": limits,
         "margin": PRACTICAL_MARGIN,
         "draws": {c["material"]: c["draws"] for c in candidates},
         "recommended": recommended(candidates),
@@ -408,7 +407,7 @@ def recommend(
 def recommendation_markdown(report: dict, top: int = 10) -> str:
     """The ``top`` candidates as a markdown table, then the one-sentence explanation of the first, what was
     removed from the rig's conditions and the notes."""
-    margin = report.get("margin", PRACTICAL_MARGIN)
+    margin = report["margin"]
     lines = [
         f"| rank | material | tubes | w [mm] | l [mm] | P(meets all) | P(force +{100 * margin:g} %) | operating "
         "force [N] (94 %) | force margin (94 %) | binding |",
@@ -428,10 +427,10 @@ def recommendation_markdown(report: dict, top: int = 10) -> str:
             f"{100 * c['margin']['force']:+.0f} % ({100 * m_low:+.0f} to {100 * m_high:+.0f} %) | {binding} |"
         )
     refused = {c["material"]: c["infeasible"] for c in report["candidates"] if c["infeasible"]}
-    verdict = report.get("recommended", {})
-    tied = verdict.get("candidates", [])[1:]
+    verdict = report["recommended"]
+    tied = verdict["candidates"][1:]
     lead = []
-    if verdict.get("verdict") == "tied":
+    if verdict["verdict"] == "tied":
         named = ", ".join(str(i + 1) for i in tied[:8]) + (f" and {len(tied) - 8} more" if len(tied) > 8 else "")
         lead = [
             f"**No single recommendation**: candidate{'s' if len(tied) > 1 else ''} {named} "

@@ -12,6 +12,7 @@ from pathlib import Path
 from ..defaults import DEFAULT_DRAWS, MAX_PRESSURE_KPA
 from ..errors import PeanoBayesInputError, did_you_mean
 from ..physics.pouch import IDEAL_FREE_STRAIN
+from .limits import material_limits
 
 _REQUIREMENT_KEYS = {
     "force_n": "minimum force [N]",
@@ -57,6 +58,11 @@ class Spec:
     source: Path
     #: code -> burst pressure [kPa] the spec states (``[limits.CODE] burst_kpa``).
     burst_kpa: dict = field(default_factory=dict)
+
+    def limits(self, code: str, idata=None) -> dict | None:
+        """The pressure limits of material ``code`` under this spec (:func:`~peano_bayes.analysis.limits.
+        material_limits`, with the burst pressure the spec states for it)."""
+        return material_limits(code, idata, self.burst_kpa.get(code), str(self.source))
 
 
 def _number(value, where: str) -> float:

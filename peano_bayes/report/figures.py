@@ -107,8 +107,7 @@ def predictive_runs(idata, discrepancy: dict | None = None) -> list[dict]:
                     test=test,
                     specimen=first,
                     run=run,
-                    title=f"{TEST_TITLE.get(test, test)}: specimen {first}, run {run}"
-                    + (f"\n(+ model misfit, sd {sd:.3g})" if sd else ""),
+                    title=f"{TEST_TITLE.get(test, test)}: specimen {first}, run {run}" + _misfit_note(sd),
                     time_s=time_s[mask],
                     observed=y[mask],
                     low=low,
@@ -118,6 +117,11 @@ def predictive_runs(idata, discrepancy: dict | None = None) -> list[dict]:
                 )
             )
     return out
+
+
+def _misfit_note(sd: float | None) -> str:
+    """The line a panel's title gets when its band carries a model misfit of ``sd``, else nothing."""
+    return f"\n(+ model misfit, sd {sd:.3g})" if sd else ""
 
 
 #: Per test: the driving input a figure plots against (observed_data variable, scale, axis label).
@@ -145,14 +149,12 @@ def response_runs(idata, discrepancy: dict | None = None) -> list[dict]:
         specimen, run = panel["specimen"], panel["run"]
         mask = (tests == panel["test"]) & (specimens == specimen) & (runs == run)
         x = np.asarray(obs[name].values)[mask] * scale
-        title = panel["title"]
         if panel["test"] == "load_cycle":
             pressure_kpa = float(np.median(np.asarray(obs["pressure_pa"].values)[mask])) / 1e3
-            title = f"load cycle at {round(pressure_kpa):d} kPa\nspecimen {specimen}, run {run}"
+            condition = f"load cycle at {round(pressure_kpa):d} kPa"
         else:
-            title = title.split("\n")[0].replace(": ", "\n", 1)
-        if panel["discrepancy_sd"]:
-            title += f" (+ misfit sd {panel['discrepancy_sd']:.3g})"
+            condition = TEST_TITLE.get(panel["test"], panel["test"])
+        title = f"{condition}\nspecimen {specimen}, run {run}" + _misfit_note(panel["discrepancy_sd"])
         out.append({**panel, "x": x, "xlabel": xlabel, "title": title})
     return out
 
@@ -410,7 +412,7 @@ def cross_material_figures(out_dir: str | Path, results: dict, metrics: dict, ra
             fig, ax = plt.subplots(figsize=(1.0 * len(codes) + 3.0, 0.45 * len(criteria) + 1.2))
             rows = [c + (" (prior only)" if ranking["criteria"][c].get("from_prior") else "") for c in criteria]
             plots.probability_heatmap(
-                ax, matrix, rows, codes, title=f"P(best within {100 * ranking.get('margin', 0.05):g} %) per criterion",
+                ax, matrix, rows, codes, title=f"P(best within {100 * ranking['margin']:g} %) per criterion",
                 colorbar_label="P(best) [-]",
             )
             written += save(fig, out_dir / "figures" / "ranking")

@@ -58,11 +58,6 @@ DRIFT_N_PER_S = 0.005
 
 #: Effects the benchmark can hide (:func:`~peano_bayes.effects.hideable`: each registry entry's ``hidden_at``
 #: gives its parameters at strength ``s``; the rig switches the element on where it is a quirk).
-def hideable_names() -> tuple[str, ...]:
-    """The registered effects the benchmark hides one at a time (those with ``hidden_at``), in registry order."""
-    return tuple(hideable())
-
-
 def not_hideable() -> tuple[str, ...]:
     """The registered physics effects the benchmark never hides: part of every base model."""
     return tuple(e for e in physics_effects() if e not in hideable())
@@ -384,7 +379,6 @@ def failed_row(case: Case, seed: int, error: str) -> dict:
 
 __all__ = [
     "Case",
-    "hideable_names",
     "not_hideable",
     "PROTOCOL",
     "TRUTH_CONFIG",
