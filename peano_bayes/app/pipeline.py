@@ -42,6 +42,7 @@ from ..inference.driver import (
     optimum_centres,
     posterior_at_mode,
     walker_start,
+    with_known_mounts,
 )
 from ..inference.fit import FitResult, fit_quality, predictions, residual_correlation, sensor_noise
 from ..inference.posterior import DEFAULT_HELD, SPECIMEN_SD, Posterior, build_posterior
@@ -163,14 +164,6 @@ def _discovery_seconds(choice) -> float | None:
     return None if seconds is None else float(seconds)
 
 
-def _with_known_mounts(dataset: Dataset, config: ModelConfig) -> ModelConfig:
-    """``config`` with the mount in the model where some runs carry an added mount compliance (runs on a second,
-    known mount are there to measure it); ``config`` itself otherwise."""
-    if any(r.added_compliance > 0 for r in dataset.runs) and not config.mount:
-        return dataclasses.replace(config, mount=True)
-    return config
-
-
 class PosteriorPlan(NamedTuple):
     """What :func:`infer` samples for a dataset: the model (``config``, with the mount where runs carry a known
     added compliance), its ``prior``, the binned ``observations``, the ``posterior`` and the walker count."""
@@ -187,7 +180,7 @@ def _plan_posterior(
 ) -> PosteriorPlan:
     """The posterior of ``dataset`` (its tests already selected) under ``config`` and ``whole_prior``; raises
     :class:`PeanoBayesInputError` for too few walkers (:func:`walker_count`)."""
-    config = _with_known_mounts(dataset, config)
+    config = with_known_mounts(dataset, config)
     prior = whole_prior.for_config(config)
     observations = prepare(dataset)
     posterior = build_posterior(observations, prior, config=config, held=() if sample_all else DEFAULT_HELD)

@@ -20,7 +20,7 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..effects import LIBRARY, adopt, effects_in, physics_effects
+from ..effects import LIBRARY, adopt, effects_in, physics_effects, superset_config
 from ..physics.model import ModelConfig
 
 
@@ -98,6 +98,35 @@ def choice_from_report(config: ModelConfig, report: dict, report_dir: str | Path
     )
 
 
+def base_config(base) -> ModelConfig:
+    """The inference model holding exactly the elements of the effects ``base`` (every other element off; the
+    inlet law is in every model, :func:`~peano_bayes.effects.adopt`)."""
+    return adopt(superset_config({}), base)
+
+
+def base_least_squares(dataset, base, prior, *, specimen: str | None = None, tests=None, seed: int = 0):
+    """The inference least squares of ``fit`` (the same starts and solver, :func:`~peano_bayes.inference.driver.
+    least_squares`) of the model with effects ``base`` (:func:`base_config`) on the runs of ``specimen`` (default:
+    the first) and ``tests`` (default: all) of ``dataset``, under ``prior`` (a whole
+    :class:`~peano_bayes.inference.priors.Prior`; the model's part is used). Returns its
+    :class:`~peano_bayes.inference.fit.FitResult`: ``params`` is where :func:`~.workflow.discover`'s base fit
+    starts (``start``), so discovery screens candidates against the optimum ``fit`` would find, not against a
+    search of its own that may stop at its step limit.
+
+    Runs on a second, known mount put the mount into the model, as in ``fit``."""
+    from ..inference.driver import least_squares, with_known_mounts
+    from ..inference.posterior import DEFAULT_HELD, build_posterior
+    from ..inference.reduce import prepare
+
+    specimen = tuple(dataset.specimens)[0] if specimen is None else specimen
+    runs = tuple(r for r in dataset.runs if r.specimen == specimen and (tests is None or r.test in tests))
+    one = dataclasses.replace(dataset, runs=runs)
+    config = with_known_mounts(one, base_config(base))
+    model_prior = prior.for_config(config)
+    posterior = build_posterior(prepare(one), model_prior, config=config, held=DEFAULT_HELD)
+    return least_squares(posterior, model_prior, seed=seed)
+
+
 def choose_model(
     dataset,
     config: ModelConfig,
@@ -127,6 +156,8 @@ def choose_model(
 
 __all__ = [
     "ModelChoice",
+    "base_config",
+    "base_least_squares",
     "choice_from_report",
     "choose_model",
     "config_dict",

@@ -19,6 +19,15 @@ from ..report.figures import save
 _UNIT = {"load_cycle": "N", "blocking": "N", "stroke": "-", "step": "-"}
 
 
+#: How the base model's fit was started (the report's ``base_start``), as the report page says it.
+BASE_STARTS = {
+    "inference_least_squares": "The base fit started at the inference least squares of the base model (the starts "
+    "and solver of `fit`).",
+    "multistart": "The base fit used discovery's own multi-start search, not the inference least squares (no prior "
+    "to run it with).",
+}
+
+
 def _binned(x: np.ndarray, r: np.ndarray, bins: int = 12) -> tuple[np.ndarray, np.ndarray]:
     ok = np.isfinite(x) & np.isfinite(r)
     if ok.sum() < 2 or np.ptp(x[ok]) == 0:
@@ -150,8 +159,8 @@ def report_markdown(report: dict) -> str:
         lines.append(
             "**Verdict: not screened.** The base model's least squares neither met its tolerance nor stopped "
             "improving, so no effect is screened or named: a candidate judged against an unfinished fit may stand "
-            "for the base fit's own misfit. Start the base nearer the data (a prior's medians, or the fit's own "
-            "least squares, as `fit --discover` does)."
+            "for the base fit's own misfit. Start the base at the inference least squares (`discover --prior`, "
+            "as `fit --discover` does)."
         )
     elif verdict == "unexplained":
         if described_baseline and report.get("drift_shown", False):
@@ -201,11 +210,12 @@ def report_markdown(report: dict) -> str:
         )
     if report["noise_model"]:
         lines.append(f"\nThe sensor or noise model needed: {', '.join(report['noise_model'])} (not physics).")
-    lines += ["", f"Base model: {' + '.join(report['base'])}. Final model: {' + '.join(report['final_model'])}.", ""]
+    lines += ["", f"Base model: {' + '.join(report['base'])}. Final model: {' + '.join(report['final_model'])}."]
+    lines += [BASE_STARTS.get(report.get("base_start"), ""), ""]
     if not (report.get("base_converged", True) or report.get("base_stationary", False)):
         lines += [
             "The base model's least squares stopped at its step limit without converging: what the search adds "
-            "may stand for a misfit of the base fit itself. Start it nearer the data (a prior's medians).",
+            "may stand for a misfit of the base fit itself. Start it at the inference least squares (`--prior`).",
             "",
         ]
     lines += _absorbed_notes(report["final_model"])

@@ -37,6 +37,15 @@ def least_squares(posterior, prior, *, n_starts: int = DEFAULT_STARTS, seed: int
     )
 
 
+def with_known_mounts(dataset, config):
+    """``config`` (a :class:`~peano_bayes.physics.ModelConfig`) with the mount in the model where some runs of
+    ``dataset`` carry an added mount compliance (runs on a second, known mount are there to measure it);
+    ``config`` itself otherwise."""
+    if any(r.added_compliance > 0 for r in dataset.runs) and not config.mount:
+        return dataclasses.replace(config, mount=True)
+    return config
+
+
 def walker_start(posterior, fitted: FitResult) -> tuple[np.ndarray, np.ndarray]:
     """Centre and covariance in theta for the walkers: the fit's point and Laplace covariance for the model
     parameters, the residual-based noise estimates, and the prior median of the pooling scale."""
@@ -178,4 +187,5 @@ __all__ = [
     "optimum_centres",
     "posterior_at_mode",
     "walker_start",
+    "with_known_mounts",
 ]

@@ -228,7 +228,9 @@ recommend_command.arguments = _recommend_arguments
 def discover_command(args):
     from ...data import load
     from ...discovery import DEFAULT_BASE, Gates, discover, discovery_data, write_report
+    from ...discovery.choice import base_least_squares
     from ...effects import check_effects
+    from ..pipeline import prior_of
 
     named = None if args.base is None else [name.strip() for name in args.base.split(",") if name.strip()]
     if named == []:
@@ -250,8 +252,23 @@ def discover_command(args):
         f"{len(split.fit_runs)} fitted and {len(split.held_out_runs)} held-out runs of specimen {split.specimen} "
         "(the first fit compiles the model: a few minutes)"
     )
+    start = None
+    try:
+        whole_prior = prior_of(dataset, args.prior)
+    except PeanoBayesInputError as err:
+        if args.prior is not None:
+            raise
+        say(f"no prior for material {dataset.material.code}, so the base fit uses discovery's own multi-start "
+            f"search, not fit's least squares ({err}); --prior FILE.toml gives it one")  # fmt: skip
+    else:
+        say(f"base model {'+'.join(base)}: the inference least squares (fit's starts and solver) ...")
+        fitted = base_least_squares(
+            dataset, base, whole_prior, specimen=split.specimen, tests=args.tests, seed=args.seed
+        )
+        say(f"least squares done in {fitted.seconds:.1f} s ({fitted.outcome()}); discovery's base fit starts there")
+        start = fitted.params
     gates = Gates(max_effects=args.max_effects)
-    result = discover(split, base=base, gates=gates, seed=args.seed, progress=say)
+    result = discover(split, base=base, gates=gates, seed=args.seed, progress=say, start=start)
     written = write_report(result, Path(args.out))
     report = result.report
     say(f"verdict: {report['verdict']}" + (f" ({', '.join(report['named'])})" if report["named"] else ""))
@@ -269,6 +286,13 @@ def _discover_arguments(p):
         metavar="EFFECTS",
         default=None,
         help="comma-separated effects already in the base model (default: tensile_stiffness,bending_stiffness)",
+    )
+    p.add_argument(
+        "--prior",
+        metavar="FILE|CODE",
+        default=None,
+        help="prior whose starts the base model's least squares draws, as fit does (default: the bundled prior of "
+        "the data's material code; without one, discovery's own multi-start search)",
     )
     p.add_argument("--specimen", default=None, help="specimen to analyse (default: the first in the file)")
     p.add_argument(
