@@ -37,7 +37,6 @@ import sys
 import time
 from pathlib import Path
 
-import jax.numpy as jnp
 import numpy as np
 import pandas as pd
 from discrepancy_benchmark import cases
@@ -46,9 +45,10 @@ from peano_bayes import enable_compilation_cache
 from peano_bayes.atomic import write_text
 from peano_bayes.discovery import discovery_data
 from peano_bayes.discovery.diagnose import diagnose, sign_flip_p, sign_flips, signature_statistic
-from peano_bayes.discovery.fitting import evaluate, jacobian_of, pointwise
+from peano_bayes.discovery.fitting import evaluate, matched_direction
 from peano_bayes.discovery.model import DEFAULT_BASE
 from peano_bayes.discovery.workflow import Gates, effect_start, fit_base
+from peano_bayes.discovery.workflow import matched_weights as matched_weights_of
 from peano_bayes.effects import LIBRARY
 from peano_bayes.validation.discovery_benchmark import hidden_dataset, run_key
 
@@ -76,16 +76,9 @@ def signature_test(w: np.ndarray, r: np.ndarray, blocks: np.ndarray, flips: np.n
 
 def matched_weights(base, effects, split) -> dict[str, np.ndarray]:
     """Per effect, its standardized prediction change (n,) from the base fit to the screen's start, with the base
-    fit's Jacobian columns (its free parameters, on the fitted bins) projected out."""
-    r0 = np.asarray(pointwise(jnp.asarray(base.x), split.fit).r)
-    args = (jnp.asarray(base.u), jnp.asarray(base.spec.mask), jnp.asarray(base.spec.pinned), split.fit)
-    j = np.asarray(jacobian_of(*args)[0])[: r0.size][:, base.spec.mask]
-    pinv = np.linalg.pinv(j, rcond=1e-10) if np.all(np.isfinite(j)) else None
-    out = {}
-    for effect in effects:
-        d = r0 - np.asarray(pointwise(jnp.asarray(effect_start(base, effect)), split.fit).r)  # (with - without) / sd
-        out[effect] = d - j @ (pinv @ d) if pinv is not None and np.all(np.isfinite(d)) else np.full(d.shape, np.nan)
-    return out
+    fit's Jacobian columns (its free parameters, on the fitted bins) projected out
+    (:func:`~peano_bayes.discovery.fitting.matched_direction`, on every fitted test)."""
+    return {effect: matched_direction(base, effect_start(base, effect), split) for effect in effects}
 
 
 def row_statistics(case, seed: int, strengths: dict) -> list[dict]:
@@ -95,7 +88,8 @@ def row_statistics(case, seed: int, strengths: dict) -> list[dict]:
     base = fit_base(DEFAULT_BASE, split.fit, starts=Gates.base_starts, seed=seed)
     fit_eval, _ = evaluate(base, split)
     cov = split.fit_covariates
-    diag = diagnose(fit_eval.r, cov, fit_eval.predicted, alpha=Gates.alpha, seed=seed)
+    library = matched_weights_of(base, split)  # the library's matched signatures, as discovery reads them
+    diag = diagnose(fit_eval.r, cov, fit_eval.predicted, alpha=Gates.alpha, seed=seed, matched=library)
     key = run_key(case, seed)
     out = [
         {"key": key, "case": case.label, "seed": seed, "signature": name, "T": diag.statistic[name],

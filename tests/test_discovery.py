@@ -289,34 +289,87 @@ def test_time_since_reversal_restarts_where_the_strain_turns():
     np.testing.assert_array_equal(_time_since_reversal(t, np.array([-1, -1, 0, 1, 1, 1])), [0, 0.5, 1, 0, 0.5, 1])
 
 
-def test_the_relaxation_signatures_see_a_decay_after_reversal_and_not_a_constant_split():
-    """A friction-like split that stays constant projects on neither relaxation signature (they are centred
-    within each half-cycle); a split that decays after each reversal, as a viscoelastic force does, is found
-    in the cycles where it is: near zero pressure by ``relaxation``, at the test pressure by
-    ``relaxation_at_load``. (Sixteen cycles: the transient sits in the first block of each half-cycle, so the
-    block sign-flip test's smallest p-value is set by the number of half-cycles.)"""
+def test_the_loaded_relaxation_signature_sees_a_decay_after_reversal_and_not_a_constant_split():
+    """A friction-like split that stays constant does not project on ``relaxation_at_load`` (centred within each
+    half-cycle); a split that decays after each reversal, as a viscoelastic force does, is found where it is, in
+    the cycles at the test pressure, and not in those near zero pressure. (Sixteen cycles: the transient sits in
+    the first block of each half-cycle, so the block sign-flip test's smallest p-value is set by the number of
+    half-cycles.)"""
     rng = np.random.default_rng(103)
     cov = _cycle_covariates([0.0, 2e5] * 8)
     n = cov.test.size
     predicted = np.linspace(0, 30, n)
     weights = signature_weights(cov, predicted)
-    for name in ("relaxation", "relaxation_at_load"):
-        assert signature_statistic(3.0 * cov.rate_sign, weights[name]) < 1e-9
-    # a half-cycle is classed by its median pressure: bins of a cycle at the boundary are not split between both
+    assert signature_statistic(3.0 * cov.rate_sign, weights["relaxation_at_load"]) < 1e-9
+    # a half-cycle is classed by its median pressure: the cycle at the boundary is in or out as a whole
     edge = _cycle_covariates([0.0, 1e5, 2e5])
     edge = replace(edge, pressure_pa=edge.pressure_pa + np.tile([-100.0, 100.0], edge.test.size // 2))
-    split = signature_weights(edge, np.linspace(0, 30, edge.test.size))
-    middle = edge.run == 1
-    in_unloaded, in_loaded = (np.count_nonzero(split[k][middle]) for k in ("relaxation", "relaxation_at_load"))
-    assert min(in_unloaded, in_loaded) == 0 and max(in_unloaded, in_loaded) > 0
-    for name in ("relaxation", "relaxation_at_load"):
-        assert signature_statistic(3.0 * edge.rate_sign, split[name]) < 1e-9
+    middle = signature_weights(edge, np.linspace(0, 30, edge.test.size))["relaxation_at_load"][edge.run == 1]
+    assert np.count_nonzero(middle) in (0, middle.size)
     decay = cov.rate_sign * np.exp(-cov.time_since_reversal_s / 4.0)
     unloaded = cov.pressure_pa < 1e5
-    at_rest = diagnose(rng.normal(size=n) + np.where(unloaded, 2.0 * decay, 0.0), cov, predicted, seed=103)
-    assert at_rest.p_holm["relaxation"] < 0.01 and at_rest.p_value["relaxation_at_load"] > 0.05
     loaded = diagnose(rng.normal(size=n) + np.where(unloaded, 0.0, 2.0 * decay), cov, predicted, seed=103)
-    assert loaded.p_holm["relaxation_at_load"] < 0.01 and loaded.p_value["relaxation"] > 0.05
+    assert loaded.p_holm["relaxation_at_load"] < 0.01
+    at_rest = diagnose(rng.normal(size=n) + np.where(unloaded, 2.0 * decay, 0.0), cov, predicted, seed=103)
+    assert at_rest.p_value["relaxation_at_load"] > 0.05
+    # without its matched weights (no step or stroke test, or the branch in the model) relaxation sees nothing
+    assert at_rest.p_value["relaxation"] == 1.0 and at_rest.statistic["relaxation"] == 0.0
+
+
+def test_the_matched_relaxation_signature_is_one_sided_along_its_direction():
+    """Residuals along the Maxwell branch's own direction are found; the same residuals against it (which a
+    stiffness >= 0 cannot explain) and white noise are not. The diagnosis keeps the weights it read."""
+    rng = np.random.default_rng(104)
+    cov = _cycle_covariates([0.0, 2e5] * 8)
+    n = cov.test.size
+    w = np.sin(np.arange(n) / 7.0) * (np.arange(n) % 100 < 30)  # any fixed direction
+    along = 6.0 * w / np.linalg.norm(w)
+    noise = rng.normal(size=n)
+    found = diagnose(noise + along, cov, np.zeros(n), seed=104, matched={"relaxation": w})
+    assert found.p_holm["relaxation"] < 0.01
+    assert found.statistic["relaxation"] == pytest.approx(np.dot(w, noise + along) / np.linalg.norm(w), rel=1e-12)
+    against = diagnose(noise - along, cov, np.zeros(n), seed=104, matched={"relaxation": w})
+    assert against.statistic["relaxation"] == 0.0 and against.p_value["relaxation"] > 0.5
+    np.testing.assert_array_equal(found.weights["relaxation"], w / np.linalg.norm(w))
+    white = [diagnose(rng.normal(size=n), cov, np.zeros(n), seed=s, matched={"relaxation": w}) for s in range(20)]
+    assert sum(d.p_value["relaxation"] < 0.05 for d in white) <= 4  # about 1 in 20 expected
+
+
+def test_the_matched_direction_is_what_a_refit_of_the_base_cannot_absorb(monkeypatch):
+    """:func:`matched_direction` on a linear stand-in of the model: the prediction change with the base's Jacobian
+    columns projected out, orthogonal to every one of them; :func:`matched_weights` keeps it on the effect's
+    registered tests only and is zero once the effect is in the model."""
+    from types import SimpleNamespace
+
+    from peano_bayes.discovery import fitting, workflow
+
+    rng = np.random.default_rng(105)
+    n, d = 60, len(NAMES)
+    jac = rng.normal(size=(n + 5, d))  # five rows past the data: the input-error rows the direction leaves out
+    sensitivity = rng.normal(size=(n + 7, d))  # seven held-out bins after the fitted ones
+
+    def fake_pointwise(x, data):
+        return SimpleNamespace(r=jnp.asarray(-sensitivity @ np.asarray(x)))
+
+    monkeypatch.setattr(fitting, "pointwise", fake_pointwise)
+    monkeypatch.setattr(fitting, "jacobian_of", lambda u, mask, pinned, data: (jnp.asarray(jac), None))
+    spec = model_spec(DEFAULT_BASE)
+    x0 = rng.normal(size=d)  # a stand-in point (the model is linear in it)
+    fit = ModelFit(spec, np.zeros(d), x0, 0.0, True, {}, np.eye(int(spec.mask.sum())))
+    tests = np.array(["load_cycle"] * 20 + ["stroke"] * 20 + ["step"] * 20)
+    split = SimpleNamespace(n_fit_bins=n, both=None, fit=None, fit_covariates=SimpleNamespace(test=tests))
+    x1 = x0 + rng.normal(size=d)
+    got = fitting.matched_direction(fit, x1, split)
+    change = (sensitivity @ (x1 - x0))[:n]
+    j = jac[:n][:, spec.mask]
+    np.testing.assert_allclose(got, change - j @ np.linalg.lstsq(j, change, rcond=None)[0], atol=1e-10)
+    np.testing.assert_allclose(j.T @ got, 0.0, atol=1e-9)
+    monkeypatch.setattr(workflow, "matched_direction", lambda f, x, s: np.ones(n))
+    w = workflow.matched_weights(fit, split)["relaxation"]
+    assert LIBRARY["viscoelastic_relaxation"].scored_test == "step"
+    np.testing.assert_array_equal(w, np.where(tests == "load_cycle", 0.0, 1.0))
+    with_branch = replace(fit, spec=model_spec((*DEFAULT_BASE, "viscoelastic_relaxation")))
+    assert not np.any(workflow.matched_weights(with_branch, split)["relaxation"])
 
 
 def test_wilson_interval_known_values():
@@ -337,6 +390,8 @@ def test_discover_cli_names_hidden_hysteresis_and_shrinks_the_gap(hysteresis_dat
     # Named first and alone; the verdict may be ambiguous with a pre-declared confusable rival (one strain rate
     # cannot tell friction from a Maxwell loop), which the benchmark's scoring counts as right.
     assert report["named"] == ["hysteresis"] and report["steps"][0]["effect"] == "hysteresis"
+    # the base fit started at fit's own least squares (PC's bundled prior), and it converged
+    assert report["base_start"] == "inference_least_squares" and report["base_converged"]
     for step in report["steps"]:  # a tie is either a confusable rival or a close call, never both
         assert not set(step["rivals"]) & set(step["close_calls"]) and step["effect"] not in step["close_calls"]
     assert score(Case(("hysteresis",), 4.0), report)["correct"], report["verdict"]
@@ -354,6 +409,8 @@ def test_discover_cli_bad_input_exits_2(tmp_path, capsys):
     assert main(["discover", str(tmp_path / "missing.csv"), "--out", str(tmp_path / "o"), "--base", "hysterisis"]) == 2
     err = capsys.readouterr().err
     assert "did you mean 'hysteresis'" in err
+    assert main(["discover", "TP", "--out", str(tmp_path / "o"), "--prior", str(tmp_path / "none.toml")]) == 2
+    assert "none.toml" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
 
 

@@ -2,8 +2,9 @@
 correlation of residuals in time.
 
 **Signature statistic:** each signature is a weight vector ``w`` over the flat bins, built from covariates and
-the fitted model's predictions. Its strength in standardized residuals
-``r`` is ``T = |sum w r| / sqrt(sum w^2)`` (a z-score for white unit residuals). Its p-value is a block
+the fitted model's predictions, or for the :data:`MATCHED` ones, the effect's own direction from the current fit.
+Its strength in standardized residuals ``r`` is ``T = |sum w r| / sqrt(sum w^2)`` (a z-score for white unit
+residuals; one-sided, ``max(sum w r, 0) / sqrt(sum w^2)``, for the matched ones). Its p-value is a block
 sign-flip test: the bins' contributions are summed per block (:data:`~peano_bayes.discovery.data.BLOCK_BINS`
 consecutive bins of one run), and the block sums' signs are flipped at random; under "no structure" a block sum
 is symmetric about zero whatever the correlation inside the block.
@@ -49,24 +50,24 @@ RELAXATION_FRACTION = 0.25
 LOADED_PRESSURE = 0.5
 
 
-def decay_after_reversal(cov: Covariates) -> tuple[np.ndarray, np.ndarray]:
-    """Per bin (n,), the weights of the two relaxation signatures ``(unloaded, loaded)``: in the load cycles'
-    half-cycles below (at or above) :data:`LOADED_PRESSURE` of the highest load-cycle pressure, the strain-rate
+def decay_after_reversal(cov: Covariates) -> np.ndarray:
+    """Per bin (n,), the weight of the ``relaxation_at_load`` signature: in the load cycles' half-cycles at or
+    above :data:`LOADED_PRESSURE` of the highest load-cycle pressure (by their median pressure), the strain-rate
     sign times ``exp(-t / tau)`` of the time ``t`` since the last strain reversal, minus its mean over the
     half-cycle (``tau`` a :data:`RELAXATION_FRACTION` of the half-cycle's duration); zero elsewhere.
 
     Orthogonal, within every half-cycle, to a constant loading/unloading split: it measures how the split
-    **decays** after each reversal, the transient of a viscoelastic element. A Dahl friction loop also has a
-    transient, over a displacement of its limit over its stiffness: microns in the benchmark's hidden friction
-    (about 0.03 N over 2e4 N/m, within one bin), but about 0.5 mm, some 12 bins at 20 Hz, for the bundled PC
-    file's 9.6 N; there a friction transient projects on these signatures too, and the gates decide between the
-    candidates both signatures bring to a refit."""
+    **decays** after each reversal, the transient of a viscoelastic element in series with the film, which acts
+    with the force. A Dahl friction loop also has a transient, over a displacement of its limit over its
+    stiffness: microns in the benchmark's hidden friction (about 0.03 N over 2e4 N/m, within one bin), but about
+    0.5 mm, some 12 bins at 20 Hz, for the bundled PC file's 9.6 N; there a friction transient projects on this
+    signature too, and the gates decide between the candidates."""
     ts = cov.time_since_reversal_s
     cycle = (cov.test == "load_cycle") & np.isfinite(ts)
-    unloaded, loaded = np.zeros(ts.shape, dtype=float), np.zeros(ts.shape, dtype=float)
+    loaded = np.zeros(ts.shape, dtype=float)
     rows = np.flatnonzero(cycle)
     if rows.size == 0:
-        return unloaded, loaded
+        return loaded
     p_max = max(float(np.nanmax(cov.pressure_pa[rows])), 1.0)
     # a new half-cycle where the run changes or the time since the reversal restarts
     new = np.ones(rows.size, dtype=bool)
@@ -75,16 +76,27 @@ def decay_after_reversal(cov: Covariates) -> tuple[np.ndarray, np.ndarray]:
     for k in range(segment[-1] + 1):
         idx = rows[segment == k]
         duration = ts[idx].max()
-        if idx.size < 3 or duration <= 0:
+        if idx.size < 3 or duration <= 0 or np.nanmedian(cov.pressure_pa[idx]) < LOADED_PRESSURE * p_max:
             continue
         decay = np.exp(-ts[idx] / (RELAXATION_FRACTION * duration))
-        target = loaded if np.nanmedian(cov.pressure_pa[idx]) >= LOADED_PRESSURE * p_max else unloaded
-        target[idx] = cov.rate_sign[idx] * (decay - decay.mean())
-    return unloaded, loaded
+        loaded[idx] = cov.rate_sign[idx] * (decay - decay.mean())
+    return loaded
 
 
-def signature_weights(cov: Covariates, predicted: np.ndarray) -> dict[str, np.ndarray]:
-    """name -> weight vector (n,) of every signature, from covariates and the model's predicted signal (n,)."""
+#: Signatures read off their effect's own direction rather than a fixed pattern of covariates: the standardized
+#: change of the fitted bins' predictions when the effect is switched on at its screening start, with the current
+#: fit's own directions projected out, on the tests the registry says the effect shows in (``Effect.shows_in``),
+#: zero elsewhere (:func:`~peano_bayes.discovery.workflow.matched_weights` computes them). They are one-sided:
+#: an effect that can only add (a Maxwell branch's stiffness is >= 0) explains residuals along its direction,
+#: not against it. A Maxwell branch across the tubes shows in the step and stroke tests (a spring that relaxes
+#: over its time constant lags the muscle where it moves fast), about eight times more than in load cycles,
+#: where no fixed covariate pattern could tell it from none (docs/discovery.md, *The relaxation signature*).
+MATCHED = frozenset({"relaxation"})
+
+
+def signature_weights(cov: Covariates, predicted: np.ndarray, matched: dict | None = None) -> dict[str, np.ndarray]:
+    """name -> weight vector (n,) of every signature, from covariates, the model's predicted signal (n,) and,
+    for the :data:`MATCHED` signatures, ``matched`` (name -> (n,); a missing one is zero: nothing to see)."""
     test = cov.test
     cycle_force = test == "load_cycle"
     force = cycle_force | (test == "blocking")
@@ -98,11 +110,11 @@ def signature_weights(cov: Covariates, predicted: np.ndarray) -> dict[str, np.nd
         if rows.size > 1:
             velocity[rows] = np.gradient(predicted[rows])
     low = (force & (test == "blocking")) | stroke
-    unloaded, loaded = decay_after_reversal(cov)
+    matched = matched or {}
     weights = {
         "loading_split": np.where(cycle_force, cov.rate_sign, 0.0),
-        "relaxation": unloaded,
-        "relaxation_at_load": loaded,
+        "relaxation": np.asarray(matched.get("relaxation", np.zeros(predicted.shape)), dtype=float),
+        "relaxation_at_load": decay_after_reversal(cov),
         "force_level": _centred(np.abs(predicted), force),
         "blocking_pressure": _centred(p, test == "blocking"),
         "free_strain": np.where(stroke & (p > 0.2), 1.0 / np.maximum(p, 0.2), 0.0),
@@ -142,24 +154,31 @@ SIGNATURES = (
 class Diagnosis:
     """Residual structure of one fit: per signature ``T`` and block sign-flip ``p``; the omnibus chi-square
     ``p`` (reported only: errors of the denoised inputs leave structure no effect explains); Holm-adjusted
-    signature p-values; and whether structure is left: some signature significant at ``alpha`` after Holm."""
+    signature p-values; whether structure is left: some signature significant at ``alpha`` after Holm; and the
+    ``weights`` (name -> (n,)) the statistics were read with, so a candidate's signature after its refit is read
+    along the same direction."""
 
     statistic: dict
     p_value: dict
     p_holm: dict
     omnibus_p: float
     alpha: float
+    weights: dict
 
     @property
     def structure_left(self) -> bool:
         return min(self.p_holm.values()) < self.alpha
 
 
-def signature_statistic(r: np.ndarray, w: np.ndarray, squared: bool = False) -> float:
-    """``T = |sum w v| / sqrt(sum w^2)`` with ``v = r`` (or ``r^2 - 1``)."""
+def signature_statistic(r: np.ndarray, w: np.ndarray, squared: bool = False, one_sided: bool = False) -> float:
+    """``T = |sum w v| / sqrt(sum w^2)`` with ``v = r`` (or ``r^2 - 1``); ``one_sided``: ``max(sum w v, 0) /
+    sqrt(sum w^2)`` (residuals against the direction count as none)."""
     v = r**2 - 1.0 if squared else r
     norm = np.sqrt(np.sum(w**2))
-    return float(abs(np.sum(w * v)) / norm) if norm > 0 else 0.0
+    if not norm > 0:
+        return 0.0
+    projection = float(np.sum(w * v))
+    return (max(projection, 0.0) if one_sided else abs(projection)) / float(norm)
 
 
 def _holm(p: dict) -> dict:
@@ -179,34 +198,41 @@ def sign_flips(block: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray]:
     return blocks, flips
 
 
-def sign_flip_p(w: np.ndarray, v: np.ndarray, blocks: np.ndarray, flips: np.ndarray) -> float:
-    """Block sign-flip p-value of ``|sum w v|`` (``blocks``, ``flips`` from :func:`sign_flips`); 1 for a zero
-    weight."""
+def sign_flip_p(w: np.ndarray, v: np.ndarray, blocks: np.ndarray, flips: np.ndarray, one_sided: bool = False) -> float:
+    """Block sign-flip p-value of ``|sum w v|`` (``one_sided``: of ``sum w v``, large values only; ``blocks``,
+    ``flips`` from :func:`sign_flips`); 1 for a zero weight."""
     if not np.any(w):
         return 1.0
     sums = np.bincount(blocks, weights=w * v, minlength=flips.shape[1])
+    if one_sided:
+        return float((1 + np.sum(flips @ sums >= sums.sum() - 1e-12)) / (N_FLIPS + 1))
     observed = abs(sums.sum())
     return float((1 + np.sum(np.abs(flips @ sums) >= observed - 1e-12)) / (N_FLIPS + 1))
 
 
-def diagnose(r: np.ndarray, cov: Covariates, predicted: np.ndarray, *, alpha: float = 0.01, seed: int = 0) -> Diagnosis:
-    """Signature statistics and p-values of standardized residuals ``r`` (n,) of a fit."""
+def diagnose(
+    r: np.ndarray, cov: Covariates, predicted: np.ndarray, *, alpha: float = 0.01, seed: int = 0, matched=None
+) -> Diagnosis:
+    """Signature statistics and p-values of standardized residuals ``r`` (n,) of a fit; ``matched``: the
+    :data:`MATCHED` signatures' weights (name -> (n,), :func:`~peano_bayes.discovery.workflow.matched_weights`)."""
     blocks, flips = sign_flips(cov.block, seed)
     n_blocks = flips.shape[1]
-    weights = signature_weights(cov, predicted)
+    weights = signature_weights(cov, predicted, matched)
     statistic, p_value = {}, {}
     for name in SIGNATURES:
         w = weights[name]
-        statistic[name] = signature_statistic(r, w, name in SQUARED)
-        p_value[name] = sign_flip_p(w, r**2 - 1.0 if name in SQUARED else r, blocks, flips)
+        statistic[name] = signature_statistic(r, w, name in SQUARED, name in MATCHED)
+        p_value[name] = sign_flip_p(w, r**2 - 1.0 if name in SQUARED else r, blocks, flips, name in MATCHED)
     counts = np.bincount(blocks, minlength=n_blocks)
     z = np.bincount(blocks, weights=r, minlength=n_blocks) / np.sqrt(np.maximum(counts, 1))
     omnibus = float(stats.chi2.sf(np.sum(z**2), n_blocks))
-    return Diagnosis(statistic, p_value, _holm(p_value), omnibus, alpha)
+    return Diagnosis(statistic, p_value, _holm(p_value), omnibus, alpha, weights)
 
 
 __all__ = [
     "Diagnosis",
+    "MATCHED",
+    "decay_after_reversal",
     "N_FLIPS",
     "SIGNATURES",
     "diagnose",

@@ -80,8 +80,8 @@ from ..effects import CONFUSABLE, LIBRARY, WIDENING_NOISE, check_effects, flexib
 from ..inference.fit import lag1_effective_size, noise_excess
 from ..physics import PARAMETERS
 from .data import Covariates, SplitData
-from .diagnose import SQUARED, Diagnosis, diagnose, signature_statistic, signature_weights
-from .fitting import BATCH, Evaluation, ModelFit, evaluate, fit_models, gauss_newton_gain
+from .diagnose import MATCHED, SQUARED, Diagnosis, diagnose, signature_statistic
+from .fitting import BATCH, Evaluation, ModelFit, evaluate, fit_models, gauss_newton_gain, matched_direction
 from .model import DEFAULT_BASE, NAMES, model_spec
 
 VERDICTS = ("named", "none", "ambiguous", "unexplained", "unconverged")
@@ -306,6 +306,29 @@ def own_evidence(evidence: dict, gates: Gates = Gates()) -> bool:
     return bool(p < gates.alpha and ratio <= gates.max_signature_ratio)
 
 
+def _statistic(r: np.ndarray, weights: dict, name: str) -> float:
+    return signature_statistic(r, weights[name], name in SQUARED, name in MATCHED)
+
+
+def matched_weights(current: ModelFit, split) -> dict[str, np.ndarray]:
+    """The :data:`~.diagnose.MATCHED` signatures' weights (name -> (n,) over the fitted bins) for a diagnosis of
+    ``current``: for the library effect each belongs to, :func:`~.fitting.matched_direction` from ``current`` to
+    the effect switched on at its screening start (:func:`effect_start`), on the tests the registry lists for it
+    (``Effect.shows_in``) and zero elsewhere; zero where the effect is already in the model (nothing to screen)
+    or its direction is not finite."""
+    out = {}
+    for name in MATCHED:
+        effect = next(e for e in LIBRARY.values() if e.signature == name)
+        n = split.n_fit_bins
+        if effect.name in current.spec.active:
+            out[name] = np.zeros(n)
+            continue
+        w = matched_direction(current, effect_start(current, effect.name), split)
+        where = np.isin(split.fit_covariates.test, effect.shows_in) & np.isfinite(w)
+        out[name] = np.where(where, w, 0.0)
+    return out
+
+
 def _score(
     name, fit, split, before: ModelFit, before_fit: Evaluation, before_held: Evaluation, gates, diag
 ) -> _Candidate:
@@ -320,12 +343,12 @@ def _score(
     delta_loglik = float(fit_eval.loglik.sum() - before_fit.loglik.sum())
     delta_k = fit.n_free - before.n_free
     delta_bic = -2.0 * (n_eff / n) * delta_loglik + delta_k * np.log(n_eff)
-    weights = signature_weights(split.fit_covariates, before_fit.predicted)
+    weights = diag.weights  # read after the refit along the directions the diagnosis read before it
     t_before = diag.statistic[effect.signature]
-    t_after = signature_statistic(fit_eval.r, weights[effect.signature], effect.signature in SQUARED)
+    t_after = _statistic(fit_eval.r, weights, effect.signature)
     flagged = [k for k in diag.p_holm if diag.p_holm[k] < gates.alpha]
     flagged_before = float(sum(diag.statistic[k] ** 2 for k in flagged))
-    flagged_after = float(sum(signature_statistic(fit_eval.r, weights[k], k in SQUARED) ** 2 for k in flagged))
+    flagged_after = float(sum(_statistic(fit_eval.r, weights, k) ** 2 for k in flagged))
     off = effect.off
     distance = _standardized_distance(fit, effect.strength, off)
     z_strength = {p: abs(distance.get(p, 0.0)) for p in effect.strength}
@@ -479,6 +502,11 @@ def signature_outcomes(by_signature: dict, p_holm: dict, candidates: list) -> di
     }
 
 
+def _diagnose(current: ModelFit, cur_fit: Evaluation, split, gates: Gates, seed: int) -> Diagnosis:
+    matched = matched_weights(current, split)
+    return diagnose(cur_fit.r, split.fit_covariates, cur_fit.predicted, alpha=gates.alpha, seed=seed, matched=matched)
+
+
 def _diagnosis_dict(d: Diagnosis) -> dict:
     return {
         "structure_left": bool(d.structure_left),
@@ -536,7 +564,7 @@ def discover(
         f"held-out {_rmse(cur_held.r):.2f}"
     )
     steps, screened, diagnoses, signatures = [], [], [], []
-    diag = diagnose(cur_fit.r, split.fit_covariates, cur_fit.predicted, alpha=gates.alpha, seed=seed)
+    diag = _diagnose(current, cur_fit, split, gates, seed)
     diagnoses.append(_diagnosis_dict(diag))
     stopped = "max_effects"
     settled = base_fit.converged or base_fit.stationary
@@ -613,7 +641,7 @@ def discover(
             + (f"; rivals within 2 se: {', '.join(rivals)}" if rivals else "")
         )
         current, cur_fit, cur_held = best.fit, best.fit_eval, best.held_eval
-        diag = diagnose(cur_fit.r, split.fit_covariates, cur_fit.predicted, alpha=gates.alpha, seed=seed)
+        diag = _diagnose(current, cur_fit, split, gates, seed)
         diagnoses.append(_diagnosis_dict(diag))
     named = [s["effect"] for s in steps if s["named"]]
     # a flexible term, or a physics effect that passed the gates without its own signature's evidence
@@ -654,6 +682,7 @@ def discover(
         "diagnoses": diagnoses,
         "gap": {"before": gap_table(first_fit, first_held, split), "after": gap_table(cur_fit, cur_held, split)},
         "base_parameters": {p: base_fit.params[p] for p in base_fit.spec.free_names},
+        "base_start": "multistart" if start is None else "inference_least_squares",
         "base_converged": base_fit.converged,
         "base_stationary": base_fit.stationary,
         "final_parameters": {p: {"value": current.params[p], "sd": current.sd.get(p)} for p in current.spec.free_names},
@@ -672,6 +701,7 @@ __all__ = [
     "fit_base",
     "gap_table",
     "identified",
+    "matched_weights",
     "preference_order",
     "refit_candidates",
     "signature_outcomes",
