@@ -8,6 +8,10 @@ its material properties on its static and dynamic behavior*, Smart Mater. Struct
   ``m y'' = F_u(p, eps) - B(p, eps) y' - m g``.
 - **Veale's force-balance model** (Table 2; equations as reconstructed for this package): a toggle linkage per tube,
   a parallel bending element and a series tensile element.
+- **A Sarosi-type force surface** (Table 1's upper branch less its force at zero pressure and strain, so that the
+  relaxed muscle carries none) and the hanging load it drives with Sarosi's damping: a third physics, neither the
+  package's model nor Veale's, for the discovery benchmark's other-physics cases
+  (:func:`peano_bayes.rig.simulate_surface_dataset`).
 
 Units are SI throughout: pressure [Pa], strain [-] (contraction positive, a fraction, not %), force [N],
 length [m], time [s]. Model parameters are pytrees of arrays (:class:`SarosiCoefficients`,
@@ -33,7 +37,10 @@ __all__ = [
     "SAROSI_TABLE1",
     "VEALE_TABLE2",
     "SarosiCoefficients",
+    "SURFACE_TABLE1",
     "SarosiStepResult",
+    "SurfaceParameters",
+    "SurfaceStepResult",
     "VealeParameters",
     "sarosi_damping",
     "sarosi_damping_ratio",
@@ -42,6 +49,10 @@ __all__ = [
     "sarosi_free_strain",
     "sarosi_stiffness",
     "simulate_sarosi_step",
+    "simulate_surface_step",
+    "surface_force",
+    "surface_free_strain",
+    "surface_strain_at_force",
     "veale_blocking_force",
     "veale_force",
     "veale_free_strain",
@@ -450,3 +461,157 @@ def veale_free_strain(pressure_pa, params: VealeParameters = VEALE_TABLE2):
     p = 0, where its pressure derivative is infinite.
     """
     return _map_scalar(lambda p: _veale_free_strain_scalar(params, p), pressure_pa)
+
+
+# === A smooth force surface from Sarosi's Table 1 (another physics for the discovery benchmark) ============
+
+
+class SurfaceParameters(eqx.Module):
+    """Coefficients of the force surface :func:`surface_force` (scalars, SI; Sarosi's names in brackets).
+
+    - ``exp_area_m2`` (a_u1) [m^2], ``stretch_force_n`` (a_u2) [N], ``exp_rate`` (a_u3) [-]: the exponential
+      term ``(a1 p + a2) exp(a3 eps)``; ``a2 a3`` is the relaxed muscle's stiffness per unit strain at eps = 0
+    - ``slope_area_m2`` (a_u4) [m^2] and ``area_m2`` (a_u5) [m^2]: the pressure term ``(a4 eps + a5) p``
+    """
+
+    exp_area_m2: jax.Array = eqx.field(converter=_as_float_array)
+    stretch_force_n: jax.Array = eqx.field(converter=_as_float_array)
+    exp_rate: jax.Array = eqx.field(converter=_as_float_array)
+    slope_area_m2: jax.Array = eqx.field(converter=_as_float_array)
+    area_m2: jax.Array = eqx.field(converter=_as_float_array)
+
+
+#: Table 1's upper (loading) branch, the branch Sarosi's dynamic model drives the load with (a_u6 cancels).
+SURFACE_TABLE1 = SurfaceParameters(
+    exp_area_m2=8.6607e-5, stretch_force_n=36.9905, exp_rate=-42.7436, slope_area_m2=-3.2994e-3, area_m2=4.656e-4
+)
+#: Strain bracket [-] of :func:`surface_strain_at_force` and its halvings (0.6 in strain to below 1e-18).
+_SURFACE_BRACKET = (-0.3, 0.3)
+_SURFACE_BISECTIONS = 64
+
+
+def _surface(params: SurfaceParameters, p, eps):
+    decay = jnp.expm1(params.exp_rate * eps)  # exp(a3 eps) - 1, exact near eps = 0
+    pressure_term = params.exp_area_m2 * (decay + 1.0) + params.slope_area_m2 * eps + params.area_m2
+    return p * pressure_term + params.stretch_force_n * decay
+
+
+def _surface_slope(params: SurfaceParameters, p, eps):
+    """``dF/d eps`` [N per unit strain]: negative for p >= 0."""
+    return (
+        params.exp_rate * (params.exp_area_m2 * p + params.stretch_force_n) * jnp.exp(params.exp_rate * eps)
+        + params.slope_area_m2 * p
+    )
+
+
+def surface_force(pressure_pa, strain, params: SurfaceParameters = SURFACE_TABLE1):
+    """Muscle force [N] of the Sarosi-type surface at pressure ``pressure_pa`` [Pa] and strain [-]:
+
+    ``F(p, eps) = F_u(p, eps) - F_u(0, 0) = p (a1 exp(a3 eps) + a4 eps + a5) + a2 (exp(a3 eps) - 1)``
+
+    Sarosi's upper branch (eq. 4, Table 1) less its force at zero pressure and zero strain (a2 + a6 = 37.25 N,
+    the 0 kPa error the paper reports for that fit), so that the relaxed, unstretched muscle carries no force:
+    ``F(0, 0) = 0``. With Table 1's signs (a3, a4 < 0; a1, a2, a5 > 0) and ``p >= 0``:
+
+    - ``F`` falls with strain everywhere (``dF/deps = a3 (a1 p + a2) exp(a3 eps) + a4 p < 0``), so each pressure
+      has one free strain (:func:`surface_free_strain`), 0 at ``p = 0``;
+    - ``F`` grows with pressure where ``a1 exp(a3 eps) + a4 eps + a5 > 0``, i.e. below a strain of about
+      ``a5 / |a4|`` = 14.1 %; the free strain stays below it (8.7 % at 200 kPa, 11.8 % at 500 kPa);
+    - at ``p = 0`` a stretched muscle (eps < 0) carries ``a2 (exp(a3 eps) - 1)`` (33 N at -1.5 %); for eps > 0
+      the formula gives a compression, which a slack muscle cannot carry and no rig test reaches.
+
+    Not peano_bayes' model (no linkage, no series or parallel elements): an empirical surface, smooth and
+    explicit. ``pressure_pa`` and ``strain`` broadcast; returns their broadcast shape.
+    """
+    return _surface(params, _as_float_array(pressure_pa), _as_float_array(strain))
+
+
+def surface_strain_at_force(pressure_pa, force_n, params: SurfaceParameters = SURFACE_TABLE1):
+    """Strain [-] at which the surface carries ``force_n`` [N] at ``pressure_pa`` [Pa] (broadcast; returns their
+    broadcast shape): the one root of the decreasing ``F(p, .) = force``.
+
+    Bisection on eps in [-0.3, 0.3], which brackets every root with ``p >= 0`` and ``force_n`` from 0 to about
+    1e7 N, then one Newton step from the bisected root with the root held fixed, which gives the implicit
+    derivative ``-(dF/dtheta) / (dF/deps)`` to parameters and inputs and leaves the value at round-off.
+    """
+    p, target = jnp.broadcast_arrays(_as_float_array(pressure_pa), _as_float_array(force_n))
+
+    def halve(_, bracket):
+        low, high = bracket
+        mid = 0.5 * (low + high)
+        above = _surface(params, p, mid) > target
+        return jnp.where(above, mid, low), jnp.where(above, high, mid)
+
+    start = (jnp.full(p.shape, _SURFACE_BRACKET[0]), jnp.full(p.shape, _SURFACE_BRACKET[1]))
+    low, high = jax.lax.fori_loop(0, _SURFACE_BISECTIONS, halve, start)
+    root = jax.lax.stop_gradient(0.5 * (low + high))
+    return root - (_surface(params, p, root) - target) / _surface_slope(params, p, root)
+
+
+def surface_free_strain(pressure_pa, params: SurfaceParameters = SURFACE_TABLE1):
+    """Free strain [-] of the surface (force zero) at ``pressure_pa`` [Pa], any shape; 0 at p = 0."""
+    return surface_strain_at_force(pressure_pa, 0.0, params)
+
+
+class SurfaceStepResult(NamedTuple):
+    """Response of :func:`simulate_surface_step` on the input time grid, shape (n,) each."""
+
+    strain: jax.Array  #: contraction strain eps [-]
+    velocity: jax.Array  #: load velocity dy/dt = l0 d eps/dt [m/s], positive while contracting
+
+
+def simulate_surface_step(
+    time_s,
+    pressure_pa,
+    load_n,
+    params: SurfaceParameters = SURFACE_TABLE1,
+    damping_ratio=0.17,
+    l0_m=0.06,
+    substeps: int = 8,
+) -> SurfaceStepResult:
+    """The surface lifting a hanging load: ``m y'' = F(p, eps) - m g - B y'``, ``y = l0 eps``, ``m = load / g``,
+    with Sarosi's damping ``B = 2 zeta sqrt(|k| m)``, ``k = (dF/deps) / l0`` (eq. 6 with the true derivative,
+    evaluated at the current state) and a constant damping ratio ``zeta = damping_ratio`` [-].
+
+    ``time_s`` [s], shape (n,), strictly increasing; ``pressure_pa`` [Pa], shape (n,), the muscle pressure
+    sampled on it and taken as linear in time between samples; ``load_n`` [N] the hanging weight; ``l0_m`` [m]
+    the flat length. The muscle starts at rest in static equilibrium at the first pressure,
+    ``F(p_0, eps_0) = load``, and settles where ``F(p, eps) = load``. Classical RK4 with ``substeps`` (static
+    int) equal steps per sample interval inside ``lax.scan``; at the rig's 250 Hz and 8 substeps (0.5 ms) the
+    stiffest state the rig reaches (about 1e5 N/m on 4 kg, omega h = 0.08) is far inside RK4's stability.
+    """
+    t = _as_float_array(time_s)
+    p = _as_float_array(pressure_pa)
+    load = _as_float_array(load_n)
+    if t.ndim != 1 or p.shape != t.shape or t.shape[0] < 2:
+        raise ValueError("time_s and pressure_pa must both have shape (n,), n >= 2")
+    gain = GRAVITY_M_PER_S2 / (load * l0_m)  # 1/(m l0) [1/(kg m)]
+    zeta = _as_float_array(damping_ratio)
+
+    def rhs(state, pressure):
+        eps, rate = state
+        spring = (_surface(params, pressure, eps) - load) * gain
+        damping = 2.0 * zeta * jnp.sqrt(jnp.abs(_surface_slope(params, pressure, eps)) * gain) * rate
+        return jnp.stack([rate, spring - damping])
+
+    def interval(state, xs):
+        p0, p1, dt = xs
+        h = dt / substeps
+
+        def substep(j, y):
+            f0, f1 = j / substeps, (j + 1) / substeps
+            pa, pm, pb = (p0 + f * (p1 - p0) for f in (f0, 0.5 * (f0 + f1), f1))
+            k1 = rhs(y, pa)
+            k2 = rhs(y + 0.5 * h * k1, pm)
+            k3 = rhs(y + 0.5 * h * k2, pm)
+            k4 = rhs(y + h * k3, pb)
+            return y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+
+        new = jax.lax.fori_loop(0, substeps, substep, state)
+        return new, new
+
+    eps0 = surface_strain_at_force(p[0], load, params)
+    y0 = jnp.stack([eps0, jnp.zeros_like(eps0)])
+    _, ys = jax.lax.scan(interval, y0, (p[:-1], p[1:], t[1:] - t[:-1]))
+    ys = jnp.concatenate([y0[None, :], ys], axis=0)
+    return SurfaceStepResult(strain=ys[:, 0], velocity=l0_m * ys[:, 1])

@@ -16,10 +16,12 @@ The physics is pure JAX (:mod:`peano_bayes.physics`); this module only drives it
 with NumPy, and builds the dataset. Write it with :func:`peano_bayes.data.save`.
 
 The package's rooms: :mod:`.protocol` (noise, protocol, quirks, generating parameters), :mod:`.measure` (what
-both rigs share: sensor noise, checks, provenance), :mod:`.peano` (the rig on this package's physics),
-:mod:`.veale` (the rig on Veale's static model).
+the rigs share: sensor noise, checks, provenance), :mod:`.peano` (the rig on this package's physics),
+:mod:`.veale` (the rig on Veale's static model), :mod:`.surface` (the rig on a Sarosi-type force surface, all four
+tests), :mod:`.conditions` (sampling rate and test pressure drawn per seed, for benchmarks).
 """
 
+from .conditions import CONDITIONS_STREAM, PRESSURE_RANGE_PA, RATE_RANGE_HZ, DrawnConditions, draw_conditions
 from .measure import MAX_FORCE_ERROR_N, MAX_POSITION_ERROR_M, RigSimulationError
 from .peano import simulate_dataset
 from .protocol import (
@@ -36,26 +38,35 @@ from .protocol import (
     resolve_parameters,
     specimen_parameters,
 )
+from .surface import SURFACE_TESTS, SURFACE_VARYING, simulate_surface_dataset
 from .veale import VEALE_TESTS, VEALE_VARYING, simulate_veale_dataset
 
 __all__ = [
+    "CONDITIONS_STREAM",
     "DEFAULT_NOISE",
     "DEFAULT_PROTOCOL",
+    "DrawnConditions",
     "MAX_FORCE_ERROR_N",
     "MAX_POSITION_ERROR_M",
+    "PRESSURE_RANGE_PA",
     "QUIRKS",
+    "RATE_RANGE_HZ",
     "RIG_TESTS",
     "RigNoise",
     "RigProtocol",
     "RigSimulationError",
+    "SURFACE_TESTS",
+    "SURFACE_VARYING",
     "VEALE_TESTS",
     "VEALE_VARYING",
     "apply_quirks",
     "check_parameter",
     "check_quirks",
+    "draw_conditions",
     "read_parameter_file",
     "resolve_parameters",
     "simulate_dataset",
+    "simulate_surface_dataset",
     "simulate_veale_dataset",
     "specimen_parameters",
 ]

@@ -153,15 +153,70 @@ def _check_specimen_values(specimen_values, specimens: int) -> list[dict[str, fl
     return checked
 
 
-def _session_runs(label: str, index: int, truths, *, seed: int, noise: RigNoise, repeats: int, drift: bool):
+#: Signals a contribution may be added to before the sensor noise (see :func:`_check_added`).
+ADDABLE_SIGNALS: tuple[str, ...] = ("strain", "pressure_pa", "force_n")
+
+
+def _check_added(added, tests: tuple[str, ...], repeats: int) -> dict[tuple[str, int], dict[str, np.ndarray]]:
+    """The checked ``added`` of a rig on another physics: ``(test, run) -> {signal: (n,) array}``, a contribution
+    added to that run's noise-free signals before the sensor noise (for a benchmark that transplants an effect
+    onto another physics). Every key must name a run the session makes (load cycles: runs ``0 .. 2 repeats-1``,
+    other tests ``0 .. repeats-1``) and every signal one of :data:`ADDABLE_SIGNALS`; lengths and whether the test
+    measures the signal are checked where the signals are made (:func:`_with_added`)."""
+    if added is None:
+        return {}
+    checked = {}
+    for key, signals in dict(added).items():
+        if not (isinstance(key, tuple) and len(key) == 2 and key[0] in tests and isinstance(key[1], int | np.integer)):
+            raise PeanoBayesInputError(
+                f"added: expected keys (test, run) with a test among {', '.join(tests)}, got {key!r}"
+            )
+        test, run = key[0], int(key[1])
+        last = (2 if test == "load_cycle" else 1) * repeats - 1
+        if not 0 <= run <= last:
+            raise PeanoBayesInputError(f"added: the session has {test} runs 0-{last}, got run {run}")
+        unknown = [name for name in signals if name not in ADDABLE_SIGNALS]
+        if unknown:
+            raise PeanoBayesInputError(
+                f"added[{key!r}]: cannot add to {', '.join(map(repr, unknown))}; expected some of "
+                + ", ".join(ADDABLE_SIGNALS)
+            )
+        checked[(test, run)] = {name: np.asarray(value, dtype=np.float64) for name, value in signals.items()}
+    return checked
+
+
+def _with_added(truth: _Truth, number: int, added: Mapping) -> _Truth:
+    """``truth`` with run ``number``'s contribution from :func:`_check_added` added (itself where there is none)."""
+    extra = added.get((truth.test, number))
+    if not extra:
+        return truth
+    changes = {}
+    for name, delta in extra.items():
+        base = getattr(truth, name)
+        if base is None:
+            raise PeanoBayesInputError(
+                f"added[{(truth.test, number)!r}]: the {truth.test} test does not measure {name}"
+            )
+        if delta.shape != base.shape:
+            raise PeanoBayesInputError(
+                f"added[{(truth.test, number)!r}][{name!r}]: expected shape {base.shape}, got {delta.shape}"
+            )
+        changes[name] = base + delta
+    return dataclasses.replace(truth, **changes)
+
+
+def _session_runs(label: str, index: int, truths, *, seed: int, noise: RigNoise, repeats: int, drift: bool, added=None):
     """Specimen ``label``'s measured runs: ``repeats`` noisy repeats of each noise-free truth, in session order
-    (noise streams keyed by specimen ``index``, test and run number; drift grows over the session)."""
+    (noise streams keyed by specimen ``index``, test and run number; drift grows over the session). ``added``:
+    the checked contributions of :func:`_check_added`, added to a run's truth before its noise (which they do
+    not change)."""
     runs, session_s = [], 0.0
     for truth in truths:
         first_run = truth.condition * repeats
         for number in range(first_run, first_run + repeats):
             rng = np.random.default_rng([seed, _NOISE_STREAM, index, RIG_TESTS.index(truth.test), number])
-            runs.append(Run(label, truth.test, number, **_measure(truth, rng, noise, session_s if drift else None)))
+            measured = _with_added(truth, number, added) if added else truth
+            runs.append(Run(label, truth.test, number, **_measure(measured, rng, noise, session_s if drift else None)))
             session_s += float(truth.time_s[-1])
     return runs
 

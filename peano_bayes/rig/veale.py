@@ -7,7 +7,7 @@ import dataclasses
 import json
 import math
 import string
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from functools import partial
 
 import jax
@@ -20,7 +20,16 @@ from ..defaults import MAX_PRESSURE_KPA
 from ..errors import PeanoBayesInputError
 from ..materials import GEOMETRY, MaterialSpec
 from ..physics.reference import VEALE_TABLE2, veale_blocking_force, veale_force, veale_free_strain
-from .measure import _check_run, _checked, _fill_optional, _provenance, _sample_times, _session_runs, _Truth
+from .measure import (
+    _check_added,
+    _check_run,
+    _checked,
+    _fill_optional,
+    _provenance,
+    _sample_times,
+    _session_runs,
+    _Truth,
+)
 from .protocol import _SPECIMEN_STREAM, DEFAULT_NOISE, DEFAULT_PROTOCOL, RigNoise, RigProtocol
 
 # --- the same protocol on another physics: Veale's force-balance model ------------------------------------------
@@ -98,6 +107,7 @@ def simulate_veale_dataset(
     tests: Iterable[str] = VEALE_TESTS,
     protocol: RigProtocol = DEFAULT_PROTOCOL,
     cycle_pressures_pa: Iterable[float] | None = None,
+    added: Mapping[tuple[str, int], Mapping[str, np.ndarray]] | None = None,
 ) -> Dataset:
     """The rig's quasi-static protocol run on Veale's force-balance model instead of peano_bayes' own physics:
     data from another model of the same muscle, for checks that must not share the fitted model's assumptions
@@ -110,10 +120,12 @@ def simulate_veale_dataset(
     :class:`~peano_bayes.physics.reference.VealeParameters` (default: the paper's Table 2); each specimen
     multiplies the stiffnesses of :data:`VEALE_VARYING` by its own log-normal factor of sigma
     ``specimen_spread``. ``tests``: some of :data:`VEALE_TESTS`. ``cycle_pressures_pa``: the load cycles'
-    pressures [Pa], one condition each (default: 0 and the material's test pressure; each in [0, 1 MPa]). The
-    provenance names the generating model and
-    every specimen's parameters. Raises :class:`~peano_bayes.errors.PeanoBayesInputError` for bad input
-    (a step test among them: the static model has no dynamics), before anything is simulated.
+    pressures [Pa], one condition each (default: 0 and the material's test pressure; each in [0, 1 MPa]).
+    ``added``: ``(test, run) -> {signal: (n,) array}`` added to those runs' noise-free signals before the sensor
+    noise (strain, pressure or force; for a benchmark that transplants an effect onto this physics), recorded in
+    the provenance (only with the default load-cycle pressures). The provenance names the generating model and
+    every specimen's parameters. Raises :class:`~peano_bayes.errors.PeanoBayesInputError` for bad input (a step
+    test among them: the static model has no dynamics), before anything is simulated.
     """
     params = VEALE_TABLE2 if params is None else params
     spec = materials.material(material)
@@ -130,6 +142,10 @@ def simulate_veale_dataset(
             raise PeanoBayesInputError(
                 f"cycle_pressures_pa must be one or more pressures in [0, {limit_pa:g}] Pa, got {cycle_pressures_pa!r}"
             )
+    n_conditions = 2 if cycle_pressures_pa is None else len(cycle_pressures_pa)
+    if added is not None and n_conditions != 2:
+        raise PeanoBayesInputError("added: give it with the default load-cycle pressures only")
+    added = _check_added(added, tests, repeats)
     base = {f.name: float(getattr(params, f.name)) for f in dataclasses.fields(params)}
     runs, per_specimen = [], {}
     for index in range(specimens):
@@ -139,7 +155,7 @@ def simulate_veale_dataset(
                for k, v in base.items()}  # fmt: skip
         per_specimen[label] = own
         truths = _veale_truths(type(params)(**own), spec, protocol, tests, cycle_pressures_pa)
-        runs += _session_runs(label, index, truths, seed=seed, noise=noise, repeats=repeats, drift=False)
+        runs += _session_runs(label, index, truths, seed=seed, noise=noise, repeats=repeats, drift=False, added=added)
     provenance = _provenance(
         source="synthetic: Veale's force-balance model (peano_bayes.rig.simulate_veale_dataset), not a "
         "measurement and not peano_bayes' own physics",
@@ -157,6 +173,8 @@ def simulate_veale_dataset(
             f"load_cycle runs {c * repeats}-{(c + 1) * repeats - 1} at {p / 1e3:g} kPa"
             for c, p in enumerate(cycle_pressures_pa)
         )
+    if added:
+        provenance["added"] = json.dumps({f"{test} {run}": sorted(signals) for (test, run), signals in added.items()})
     return Dataset(
         material=spec.data_material(),
         geometry=GEOMETRY,
