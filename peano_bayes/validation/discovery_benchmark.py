@@ -13,24 +13,56 @@ inlet, on material PC's protocol (200 kPa), shortened (:data:`PROTOCOL`), one sp
 :mod:`peano_bayes.effects`), ``SNR = max over tests of RMS(y_with - y_without) / sigma_test`` from noise-free
 simulations at equal base parameters, with ``sigma_test`` the rig's per-sample noise of that test's signal.
 :func:`strength_for_snr` finds ``s`` by bisection in log ``s``.
+
+**Other physics** (``Case.physics``): ``"veale"``, Veale's force-balance model (Table 2; static, so load cycles,
+blocking and stroke only; :func:`~peano_bayes.rig.simulate_veale_dataset`) and ``"surface"``, a Sarosi-type force
+surface with all four tests (Table 1; :func:`~peano_bayes.rig.simulate_surface_dataset`). With nothing hidden a
+case is a null on data no model of this package made. An effect is hidden on them by transplanting it: the other
+physics' noise-free signals plus the effect's own contribution in the package's physics at the same inputs
+(:func:`effect_contribution`: the noise-free truth with the effect at its strength minus without, one specimen at
+seed 0, on the case's conditions), then the rig's noise. The strength is calibrated on that contribution over
+the tests the physics runs (:func:`case_strengths`), so the nominal SNR is the transplanted signal's. On Veale's
+model an effect whose signal shows only in the step test (the registry's ``shows_in``: ``flow_restriction``,
+``nonlinear_damping``) cannot be hidden.
+
+**Drawn conditions** (``Case.conditions = "drawn"``): the quasi-static sampling rate (10-100 Hz) and the test
+pressure (100-400 kPa, peak forces about 100-300 N) drawn from the seed (:func:`~peano_bayes.rig.draw_conditions`,
+its own seed stream), recorded in the dataset's provenance (``drawn_conditions``) and the row (``conditions``);
+the strengths are calibrated on each seed's conditions. The default, ``"fixed"``, is material PC's pressure on
+:data:`PROTOCOL`, and every case with the defaults makes the data it made before these options existed.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import functools
+import json
 import math
 import time
 from dataclasses import dataclass
+from types import MappingProxyType
 
 import numpy as np
 
 from ..data import Dataset
 from ..discovery.model import DEFAULT_BASE, NAMES, ModelSpec, model_spec
 from ..effects import CONFUSABLE, LIBRARY, OPEN_ORIFICE_M2, hideable, physics_effects
+from ..errors import did_you_mean
 from ..inference.reduce import OBSERVED, SPECIMEN_SCALED
 from ..physics import ModelConfig
-from ..rig import RigNoise, RigProtocol, RigSimulationError, simulate_dataset, simulate_veale_dataset
+from ..rig import (
+    RIG_TESTS,
+    SURFACE_TESTS,
+    VEALE_TESTS,
+    DrawnConditions,
+    RigNoise,
+    RigProtocol,
+    RigSimulationError,
+    draw_conditions,
+    simulate_dataset,
+    simulate_surface_dataset,
+    simulate_veale_dataset,
+)
 
 MATERIAL = "PC"
 TRUTH_CONFIG = ModelConfig(bending=True, tensile=True, extension=False, friction="none")
@@ -46,8 +78,14 @@ PROTOCOL = RigProtocol(
 REPEATS = 3
 #: A rig without sensor noise or drift.
 QUIET = RigNoise(0.0, 0.0, 0.0, 0.0, 0.0)
-#: Where a case's data come from: the package's own physics, or Veale's force-balance model (a null case).
-PHYSICS = ("peano", "veale")
+#: Where a case's data come from: the package's own physics, Veale's force-balance model, or a Sarosi-type surface.
+PHYSICS = ("peano", "veale", "surface")
+#: The rig tests each physics runs (Veale's model is static: no step test).
+PHYSICS_TESTS = MappingProxyType({"peano": RIG_TESTS, "veale": VEALE_TESTS, "surface": SURFACE_TESTS})
+#: How a case's conditions are set: material PC's on :data:`PROTOCOL`, or drawn per seed.
+CONDITIONS = ("fixed", "drawn")
+#: The signals of an effect's contribution transplanted onto another physics (what every physics measures).
+TRANSPLANTED = ("strain", "pressure_pa", "force_n")
 #: Reference force noise [N] at which SNRs are calibrated; strain noise scales with it (2e-4 per 0.2 N).
 REFERENCE_FORCE_SD_N = 0.2
 #: The second mount of the two-mount cases [m/N]: twice the series compliance the benchmark hides at SNR 2.
@@ -55,6 +93,7 @@ SECOND_MOUNT_M_PER_N = 2e-5
 TWO_MOUNTS = (0.0, SECOND_MOUNT_M_PER_N)
 #: Load-cell drift of the out-of-library case [N/s] (about 0.7 N over one specimen's session).
 DRIFT_N_PER_S = 0.005
+
 
 #: Effects the benchmark can hide (:func:`~peano_bayes.effects.hideable`: each registry entry's ``hidden_at``
 #: gives its parameters at strength ``s``; the rig switches the element on where it is a quirk).
@@ -68,11 +107,15 @@ class Case:
     """What the rig hides. ``effects`` names (empty: none); ``snr`` of each; ``drift`` load-cell drift (out of
     library); ``force_sd_n`` the load cell's noise [N] (strain noise scales with it); ``pressure_sd_pa`` the
     pressure sensors' noise [Pa] (default the rig's, :class:`~peano_bayes.rig.RigNoise`; probes shrink it).
-    ``physics``: ``"peano"`` (the package's own model, the default) or ``"veale"``, a null case whose data come
-    from another model of the same muscle (:func:`~peano_bayes.rig.simulate_veale_dataset`, Table 2 values,
-    quasi-static tests only): no library effect is hidden, so naming one is a false positive. ``mounts``: the
+    ``physics``: ``"peano"`` (the package's own model, the default), ``"veale"`` (Veale's force-balance model,
+    Table 2, quasi-static tests only) or ``"surface"`` (a Sarosi-type force surface, all four tests): data from
+    another model of the muscle, a null when nothing is hidden (naming an effect is then a false positive), and
+    with ``effects`` each transplanted onto it (module docstring); on one mount, without drift. ``mounts``: the
     known compliances the specimen is tested on (:data:`TWO_MOUNTS` runs the protocol on the rig's mount and
-    on one :data:`SECOND_MOUNT_M_PER_N` softer; every run records its mount, see ``docs/data-format.md``)."""
+    on one :data:`SECOND_MOUNT_M_PER_N` softer; every run records its mount, see ``docs/data-format.md``).
+    ``conditions``: ``"fixed"`` (material PC's on :data:`PROTOCOL`) or ``"drawn"`` per seed (module docstring).
+    Raises ``ValueError`` for an unknown physics or conditions, drift or mounts on another physics, and an
+    effect that cannot be hidden on the case's physics (with the reason)."""
 
     effects: tuple[str, ...] = ()
     snr: float = 0.0
@@ -81,21 +124,78 @@ class Case:
     pressure_sd_pa: float = RigNoise.pressure_sd_pa
     physics: str = "peano"
     mounts: tuple[float, ...] = (0.0,)
+    conditions: str = "fixed"
 
     def __post_init__(self):
         if self.physics not in PHYSICS:
-            raise ValueError(f"Case.physics must be one of {', '.join(PHYSICS)}, got {self.physics!r}")
-        if self.physics != "peano" and (self.effects or self.drift or self.mounts != (0.0,)):
-            raise ValueError("a case on other physics is a null case on one mount: no hidden effects and no drift")
+            raise ValueError(
+                f"Case.physics must be one of {', '.join(PHYSICS)}, got {self.physics!r}"
+                + did_you_mean(str(self.physics), PHYSICS)
+            )
+        if self.conditions not in CONDITIONS:
+            raise ValueError(f"Case.conditions must be one of {', '.join(CONDITIONS)}, got {self.conditions!r}")
+        if self.physics != "peano":
+            if self.drift or self.mounts != (0.0,):
+                raise ValueError(
+                    f"a case on {self.physics}'s physics runs on one mount without drift (drift and mounts are the "
+                    "package rig's)"
+                )
+            for effect in self.effects:
+                _check_transplant(effect, self.physics)
 
     @property
     def label(self) -> str:
-        if self.physics != "peano":
-            return f"none-{self.physics}"
-        if self.drift:
-            return "drift"
+        drawn = "@drawn" if self.conditions == "drawn" else ""
         name = "+".join(self.effects) if self.effects else "none"
-        return name + (f"@{len(self.mounts)}mounts" if self.mounts != (0.0,) else "")
+        if self.physics != "peano":
+            return f"{name}-{self.physics}{drawn}"
+        if self.drift:
+            return "drift" + drawn
+        return name + (f"@{len(self.mounts)}mounts" if self.mounts != (0.0,) else "") + drawn
+
+    @property
+    def own_calibration(self) -> bool:
+        """Whether the case hides effects whose strengths depend on more than (effect, SNR): calibrated on its
+        own conditions and tests (:func:`case_strengths`), not by :func:`strength_for_snr` on the fixed
+        protocol."""
+        return bool(self.effects) and (self.conditions != "fixed" or PHYSICS_TESTS[self.physics] != RIG_TESTS)
+
+
+#: What each physics is, for messages.
+_PHYSICS_NAMES = {
+    "peano": "the package's model",
+    "veale": "Veale's force-balance model",
+    "surface": "the Sarosi-type surface",
+}
+
+
+def _check_transplant(effect: str, physics: str) -> None:
+    """Raise ``ValueError`` unless ``effect`` can be hidden on ``physics`` (another physics than the package's)."""
+    if effect not in hideable():
+        raise ValueError(
+            f"effect {effect!r} cannot be hidden{did_you_mean(str(effect), hideable())}; hideable effects: "
+            + ", ".join(hideable())
+        )
+    runs = PHYSICS_TESTS[physics]
+    shows_in = LIBRARY[effect].shows_in
+    if not set(shows_in) & set(runs):
+        static = " (it is static: no step test)" if "step" not in runs else ""
+        raise ValueError(
+            f"effect {effect!r} cannot be hidden on {physics}: its signal shows only in the {', '.join(shows_in)} "
+            f"test (the registry's shows_in), and {_PHYSICS_NAMES[physics]} runs only {', '.join(runs)}{static}"
+        )
+
+
+def case_conditions(case: Case, seed: int) -> DrawnConditions | None:
+    """The conditions ``case`` draws at ``seed`` (:func:`~peano_bayes.rig.draw_conditions`), ``None`` when fixed."""
+    return draw_conditions(seed) if case.conditions == "drawn" else None
+
+
+def _setting(drawn: DrawnConditions | None):
+    """The material (code or spec) and protocol of a session on ``drawn`` conditions (``None``: the fixed ones)."""
+    if drawn is None:
+        return MATERIAL, PROTOCOL
+    return drawn.material(MATERIAL), drawn.protocol(PROTOCOL)
 
 
 def rig_noise(force_sd_n: float, pressure_sd_pa: float = RigNoise.pressure_sd_pa) -> RigNoise:
@@ -109,8 +209,17 @@ def rig_noise(force_sd_n: float, pressure_sd_pa: float = RigNoise.pressure_sd_pa
 
 
 def _simulate(
-    params: dict, quirks: tuple, seed: int, noise: RigNoise, drift: bool, softening: float, mounts=(0.0,)
+    params: dict,
+    quirks: tuple,
+    seed: int,
+    noise: RigNoise,
+    drift: bool,
+    softening: float,
+    mounts=(0.0,),
+    drawn: DrawnConditions | None = None,
+    tests: tuple[str, ...] | None = None,
 ) -> Dataset:
+    material, protocol = _setting(drawn)
     kw = dict(
         added_compliances=mounts,
         config=TRUTH_CONFIG,
@@ -120,18 +229,20 @@ def _simulate(
         drift=drift,
         specimens=1,
         repeats=REPEATS,
-        protocol=PROTOCOL,
+        protocol=protocol,
     )
+    if tests is not None:
+        kw["tests"] = tests
     if softening == 0.0:
-        return simulate_dataset(MATERIAL, params, **kw)
+        return simulate_dataset(material, params, **kw)
     # Cyclic softening: run n (its cycle index) of every condition has its wall stiffness scaled by 1 + a e^-n.
     runs = []
     for n in range(REPEATS):
         factor = 1.0 + softening * math.exp(-n)
         scaled = {k: v * factor if k in SPECIMEN_SCALED else v for k, v in params.items()}
-        ds = simulate_dataset(MATERIAL, scaled, **kw)
+        ds = simulate_dataset(material, scaled, **kw)
         runs += [r for r in ds.runs if r.run % REPEATS == n]
-    order = {r.key: i for i, r in enumerate(simulate_dataset(MATERIAL, params, **kw).runs)}
+    order = {r.key: i for i, r in enumerate(simulate_dataset(material, params, **kw).runs)}
     return dataclasses.replace(ds, runs=tuple(sorted(runs, key=lambda r: order[r.key])))
 
 
@@ -173,12 +284,22 @@ def reference_sigma(test: str) -> float:
     return noise.force_sd_n if OBSERVED[test][0] == "force_n" else noise.strain_sd
 
 
-def snr_by_test(effect: str, strength: float) -> dict[str, float]:
+@functools.lru_cache(maxsize=8)
+def _package_null(drawn: DrawnConditions | None, tests: tuple[str, ...] | None) -> Dataset:
+    """The noise-free truth without a hidden effect, one specimen at seed 0, on ``drawn`` conditions and ``tests``
+    (``None``: every test): what calibration and transplanting subtract."""
+    return _simulate(dict(TRUTH_PARAMS), (), 0, QUIET, False, 0.0, drawn=drawn, tests=tests)
+
+
+def snr_by_test(
+    effect: str, strength: float, drawn: DrawnConditions | None = None, tests: tuple[str, ...] | None = None
+) -> dict[str, float]:
     """Per rig test: RMS(y_with - y_without) / sigma of ``effect`` at ``strength``, at equal base parameters,
-    noise-free (sigma: the rig's per-sample noise at :data:`REFERENCE_FORCE_SD_N`)."""
-    without = _simulate(dict(TRUTH_PARAMS), (), 0, QUIET, False, 0.0)
+    noise-free (sigma: the rig's per-sample noise at :data:`REFERENCE_FORCE_SD_N`); on ``drawn`` conditions
+    (default the fixed ones) and ``tests`` (default all four)."""
+    without = _package_null(drawn, tests)
     params, quirks, softening = _truth((effect,), {effect: strength})
-    with_ = _simulate(params, quirks, 0, QUIET, False, softening)
+    with_ = _simulate(params, quirks, 0, QUIET, False, softening, drawn=drawn, tests=tests)
     out = {}
     for test in sorted({r.test for r in without.runs}):
         signal = OBSERVED[test][0]
@@ -188,22 +309,72 @@ def snr_by_test(effect: str, strength: float) -> dict[str, float]:
     return out
 
 
-def _snr(effect: str, s: float) -> float:
-    return max(snr_by_test(effect, s).values())
+def _snr(effect: str, s: float, drawn: DrawnConditions | None = None, tests: tuple[str, ...] | None = None) -> float:
+    return max(snr_by_test(effect, s, drawn, tests).values())
+
+
+def _bisect_strength(snr_at, snr: float, iterations: int) -> float:
+    """The strength ``s`` with ``snr_at(s) = snr`` by bisection in log s on [1e-3, 1e2]."""
+    lo, hi = math.log(1e-3), math.log(1e2)
+    for _ in range(iterations):
+        mid = 0.5 * (lo + hi)
+        try:
+            value = snr_at(math.exp(mid))
+        except RigSimulationError:  # a strength the physics solver cannot simulate counts as too strong
+            value = math.inf
+        lo, hi = (mid, hi) if value < snr else (lo, mid)
+    return math.exp(0.5 * (lo + hi))
 
 
 @functools.cache
 def strength_for_snr(effect: str, snr: float, iterations: int = 12) -> float:
     """Strength factor ``s`` of ``effect`` whose SNR is ``snr`` (bisection in log s on [1e-3, 1e2])."""
-    lo, hi = math.log(1e-3), math.log(1e2)
-    for _ in range(iterations):
-        mid = 0.5 * (lo + hi)
-        try:
-            value = _snr(effect, math.exp(mid))
-        except RigSimulationError:  # a strength the physics solver cannot simulate counts as too strong
-            value = math.inf
-        lo, hi = (mid, hi) if value < snr else (lo, mid)
-    return math.exp(0.5 * (lo + hi))
+    return _bisect_strength(lambda s: _snr(effect, s), snr, iterations)
+
+
+@functools.cache
+def strength_for_conditions(
+    effect: str,
+    snr: float,
+    drawn: DrawnConditions | None = None,
+    tests: tuple[str, ...] = RIG_TESTS,
+    iterations: int = 12,
+) -> float:
+    """:func:`strength_for_snr` on ``drawn`` conditions (``None``: the fixed ones) with the SNR taken over
+    ``tests`` only (the tests a case's physics runs); the fixed protocol on every test is
+    :func:`strength_for_snr` itself. Cached by its arguments (the conditions carry their seed)."""
+    tests = tuple(tests)
+    if drawn is None and tests == RIG_TESTS:
+        return strength_for_snr(effect, snr, iterations)
+    return _bisect_strength(lambda s: _snr(effect, s, drawn, tests), snr, iterations)
+
+
+def case_strengths(case: Case, seed: int) -> dict[str, float]:
+    """The strength of each effect ``case`` hides at ``seed``: calibrated to ``case.snr`` on the case's
+    conditions at that seed, over the tests its physics runs (:func:`strength_for_conditions`)."""
+    drawn = case_conditions(case, seed)
+    tests = PHYSICS_TESTS[case.physics]
+    return {e: strength_for_conditions(e, case.snr, drawn, tests) for e in case.effects}
+
+
+def effect_contribution(
+    effects: tuple[str, ...], strengths: dict, drawn: DrawnConditions | None = None, tests=RIG_TESTS
+) -> dict[tuple[str, int], dict[str, np.ndarray]]:
+    """What ``effects`` at ``strengths`` add to the package's physics, noise-free: the truth with them minus the
+    truth without (one specimen at seed 0, as calibrated), on ``drawn`` conditions and ``tests``. By ``(test,
+    run)``: each signal of :data:`TRANSPLANTED` the test measures, (n,) [its SI unit] (the step's muscle pressure
+    included: a restricted inlet lags it). What :func:`hidden_dataset` adds to another physics' signals."""
+    tests = tuple(tests)
+    without = _package_null(drawn, tests)
+    params, quirks, softening = _truth(tuple(effects), strengths)
+    with_ = _simulate(params, quirks, 0, QUIET, False, softening, drawn=drawn, tests=tests)
+    out = {}
+    for a, b in zip(with_.runs, without.runs, strict=True):
+        if a.key != b.key:
+            raise RuntimeError(f"the sessions with and without {', '.join(effects)} differ in their runs")
+        deltas = {name: getattr(a, name) - getattr(b, name) for name in TRANSPLANTED}
+        out[(a.test, a.run)] = {name: d for name, d in deltas.items() if np.all(np.isfinite(d))}
+    return out
 
 
 def hidden_dataset(case: Case, seed: int, strengths: dict | None = None, *, quiet: bool = False) -> Dataset:
@@ -211,11 +382,37 @@ def hidden_dataset(case: Case, seed: int, strengths: dict | None = None, *, quie
     ``quiet``, the same session without sensor noise or load-cell drift: the same specimens and inputs (the rig
     draws specimens and noise from separate streams), the signals as the muscle made them."""
     noise = QUIET if quiet else rig_noise(case.force_sd_n, case.pressure_sd_pa)
-    if case.physics == "veale":
-        return simulate_veale_dataset(MATERIAL, seed=seed, noise=noise, specimens=1, repeats=REPEATS, protocol=PROTOCOL)
-    strengths = strengths or {e: strength_for_snr(e, case.snr) for e in case.effects}
-    params, quirks, softening = _truth(case.effects, strengths)
-    return _simulate(params, quirks, seed, noise, case.drift and not quiet, softening, case.mounts)
+    drawn = case_conditions(case, seed)
+    if case.effects:
+        strengths = strengths or case_strengths(case, seed)
+    if case.physics == "peano":
+        params, quirks, softening = _truth(case.effects, strengths or {})
+        dataset = _simulate(params, quirks, seed, noise, case.drift and not quiet, softening, case.mounts, drawn=drawn)
+    else:
+        dataset = _other_physics(case, seed, noise, drawn, strengths)
+    return dataset if drawn is None else drawn.record(dataset)
+
+
+def _other_physics(case: Case, seed: int, noise: RigNoise, drawn, strengths) -> Dataset:
+    """The session of ``case`` on another physics, its hidden effects transplanted (:func:`effect_contribution`)."""
+    material, protocol = _setting(drawn)
+    simulate = simulate_veale_dataset if case.physics == "veale" else simulate_surface_dataset
+    kw = dict(seed=seed, noise=noise, specimens=1, repeats=REPEATS, protocol=protocol)
+    if not case.effects:
+        return simulate(material, **kw)
+    added = effect_contribution(case.effects, strengths, drawn, PHYSICS_TESTS[case.physics])
+    dataset = simulate(material, added=added, **kw)
+    provenance = {
+        **dataset.provenance,
+        "transplanted": json.dumps(
+            {
+                "effects": {e: float(strengths[e]) for e in case.effects},
+                "from": "peano_bayes' physics (discovery benchmark truth), noise-free, with minus without, one "
+                "specimen at seed 0, on the same conditions",
+            }
+        ),
+    }
+    return dataclasses.replace(dataset, provenance=provenance)
 
 
 def outcome_label(report: dict) -> str:
@@ -238,7 +435,7 @@ def score(case: Case, report: dict) -> dict:
     truth = set(case.effects)
     if case.drift:  # out of the library: nothing to name, and the drift must be found and shown in time
         correct = report["verdict"] == "unexplained" and not named and bool(report.get("drift_shown", False))
-    elif case.physics != "peano":  # another physics, nothing hidden: nothing to name, a misfit may remain
+    elif case.physics != "peano" and not truth:  # another physics, nothing hidden: nothing to name, a misfit may remain
         correct = report["verdict"] in ("none", "unexplained") and not named
     elif not truth:
         correct = report["verdict"] == "none"
@@ -333,9 +530,23 @@ def run_case(case: Case, seed: int, strengths: dict, tests: tuple[str, ...] | No
     """One benchmark run as a work unit of :func:`peano_bayes.app.fanout.run_units`: the hidden-effect dataset of
     ``case`` at ``seed`` (``strengths`` by effect), discovery on its ``tests`` (default: all it has), and its
     JSON-ready scored row (:func:`score`, :func:`truth_gap`, the report's verdict, named effects, noise model,
-    screening and diagnoses, and the seconds it took)."""
+    screening and diagnoses, and the seconds it took).
+
+    A case with :attr:`Case.own_calibration` (drawn conditions, or a physics without the step test) calibrates
+    its own strengths (:func:`case_strengths`; ``strengths`` is not read) and its row records them
+    (``strengths``) and the calibration's seconds; a drawn-condition row records the draw (``conditions``); the
+    label names the physics. A row of a case with the default conditions and physics has the fields it always
+    had."""
     from ..discovery import discover, discovery_data
 
+    extra = {}
+    if case.own_calibration:
+        began = time.perf_counter()
+        strengths = case_strengths(case, seed)
+        extra.update(strengths=strengths, calibration_seconds=time.perf_counter() - began)
+    drawn = case_conditions(case, seed)
+    if drawn is not None:
+        extra["conditions"] = drawn.as_dict()
     start = time.perf_counter()
     strengths = {e: strengths[e] for e in case.effects}
     dataset = hidden_dataset(case, seed, strengths)
@@ -356,6 +567,7 @@ def run_case(case: Case, seed: int, strengths: dict, tests: tuple[str, ...] | No
         screened=result.report["screened"],
         diagnoses=result.report["diagnoses"],
         seconds=time.perf_counter() - start,
+        **extra,
     )
     return row
 
@@ -374,14 +586,22 @@ def failed_row(case: Case, seed: int, error: str) -> dict:
         "false_positive": False,
         "gap_ratio": float("nan"),
         "effects": list(case.effects),
+        **({"conditions": draw_conditions(seed).as_dict()} if case.conditions == "drawn" else {}),
     }
 
 
 __all__ = [
+    "CONDITIONS",
     "Case",
     "not_hideable",
+    "PHYSICS",
+    "PHYSICS_TESTS",
     "PROTOCOL",
+    "TRANSPLANTED",
     "TRUTH_CONFIG",
+    "case_conditions",
+    "case_strengths",
+    "effect_contribution",
     "failed_row",
     "hidden_dataset",
     "noise_free_dataset",
@@ -392,6 +612,7 @@ __all__ = [
     "run_key",
     "score",
     "snr_by_test",
+    "strength_for_conditions",
     "strength_for_snr",
     "true_model",
     "truth_gap",
