@@ -162,3 +162,23 @@ def test_other_physics_with_hidden_effects_is_scored_like_the_packages_own():
 def test_bad_cases_are_refused_with_the_reason(kwargs, message):
     with pytest.raises(ValueError, match=message):
         Case(**kwargs)
+
+
+def test_the_benchmark_script_adds_the_new_cases_only_when_asked_and_finds_their_rows_again():
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).parents[1] / "experiments"))
+    import discrepancy_benchmark as bench
+
+    default = bench.cases([2.0], [0.1, 0.2, 0.4])
+    assert len(default) == 17 and all(c.conditions == "fixed" and c.physics in ("peano", "veale") for c in default)
+    wide = bench.cases([2.0], [0.2], other_physics=True, drawn=True)
+    labels = {c.label for c in wide}
+    assert {"none-surface@drawn", "none-veale@drawn", "none@drawn", "hysteresis-surface@drawn"} <= labels
+    assert "flow_restriction-veale@drawn" not in labels and "flow_restriction-surface@drawn" in labels
+    assert not any(c.physics != "peano" and "series_compliance" in c.effects for c in wide)  # the mount: excluded
+    assert labels <= set(bench.CASE_LABELS)
+    for case in wide:
+        row = {"key": run_key(case, 15001), "seed": 15001, "snr": case.snr, "force_sd_n": case.force_sd_n}
+        assert bench.case_of_row(row) == case

@@ -186,6 +186,21 @@ def _check_transplant(effect: str, physics: str) -> None:
         )
 
 
+def hideable_on(physics: str) -> tuple[str, ...]:
+    """The effects a case on ``physics`` can hide: every hideable effect on the package's physics and on the
+    surface; on Veale's model those whose signal shows in a quasi-static test."""
+    if physics == "peano":
+        return tuple(hideable())
+    out = []
+    for effect in hideable():
+        try:
+            _check_transplant(effect, physics)
+        except ValueError:
+            continue
+        out.append(effect)
+    return tuple(out)
+
+
 def case_conditions(case: Case, seed: int) -> DrawnConditions | None:
     """The conditions ``case`` draws at ``seed`` (:func:`~peano_bayes.rig.draw_conditions`), ``None`` when fixed."""
     return draw_conditions(seed) if case.conditions == "drawn" else None
@@ -604,6 +619,7 @@ __all__ = [
     "effect_contribution",
     "failed_row",
     "hidden_dataset",
+    "hideable_on",
     "noise_free_dataset",
     "outcome_label",
     "reference_sigma",
