@@ -14,7 +14,7 @@ in this order:
 The pressure is the force scale: peak forces grow about linearly with it. Measured on material PC's protocol,
 noise-free, one specimen at nominal values, the largest force of a session (the pressurized load cycle at -1.5 %
 strain) is 123, 194, 253 and 305 N at 100, 200, 300 and 400 kPa on the package's own physics (Veale's elastic
-truth of the discovery benchmark), 127, 194, 251 and 303 N on Veale's force-balance model (Table 2), and 101,
+truth of the discovery benchmark), 126, 194, 251 and 303 N on Veale's force-balance model (Table 2), and 101,
 169, 237 and 305 N on the Sarosi-type surface (:func:`~peano_bayes.physics.reference.surface_force`): peak
 forces from about 100 N up to about 300 N. The muscle's geometry, the loads (start tension, stroke and step
 loads) and the step test's sampling stay the protocol's.
