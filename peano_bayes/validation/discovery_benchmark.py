@@ -393,9 +393,12 @@ def effect_contribution(
 
 
 def hidden_dataset(case: Case, seed: int, strengths: dict | None = None, *, quiet: bool = False) -> Dataset:
-    """The rig dataset of ``case`` (strengths by effect, default calibrated by :func:`strength_for_snr`). With
-    ``quiet``, the same session without sensor noise or load-cell drift: the same specimens and inputs (the rig
-    draws specimens and noise from separate streams), the signals as the muscle made them."""
+    """The rig dataset of ``case`` at ``seed`` (strengths by effect, default calibrated by :func:`case_strengths`,
+    which is :func:`strength_for_snr` for a case of the fixed protocol on every test). With ``quiet``, the same
+    session without sensor noise or load-cell drift: the same specimens and inputs (the rig draws specimens and
+    noise from separate streams), the signals as the muscle made them. A case on another physics is that physics'
+    session with its effects' contributions added (:func:`effect_contribution`), recorded in the provenance
+    (``transplanted``); drawn conditions are recorded too (``drawn_conditions``)."""
     noise = QUIET if quiet else rig_noise(case.force_sd_n, case.pressure_sd_pa)
     drawn = case_conditions(case, seed)
     if case.effects:
