@@ -20,7 +20,14 @@ from peano_bayes.app.cli import main, strict_json
 from peano_bayes.data import save
 from peano_bayes.discovery import LIBRARY, discovery_data
 from peano_bayes.discovery.data import DISCOVERY_BIN_SIZES, DISCOVERY_EVERY_SAMPLE
-from peano_bayes.discovery.diagnose import diagnose, signature_statistic, signature_weights
+from peano_bayes.discovery.diagnose import (
+    MATCHED,
+    SIGNATURE_BLOCK_BINS,
+    diagnose,
+    signature_statistic,
+    signature_weights,
+    sub_blocks,
+)
 from peano_bayes.discovery.fitting import ModelFit, pointwise
 from peano_bayes.discovery.model import (
     DEFAULT_BASE,
@@ -245,16 +252,21 @@ def test_signature_test_respects_block_structure():
     assert not white.structure_left
     split = diagnose(rng.normal(size=n) + 0.5 * cov.rate_sign, cov, predicted, seed=102)
     assert split.p_holm["loading_split"] < 0.01
-    # Noise constant within blocks (strong correlation in time), no structure: the block sign-flip test keeps
-    # its level, the i.i.d. z-score rejects about half the time.
+    # Noise constant within the signature tests' blocks (strong correlation in time), no structure: the block
+    # sign-flip test keeps its level, the i.i.d. z-score rejects about half the time. Noise correlated over
+    # longer stretches than a block is what the test cannot absorb: over ten bins it rejects too often.
+    k = SIGNATURE_BLOCK_BINS
     w = cov.rate_sign / np.sqrt(n)
-    block_rejects = naive_rejects = 0
+    block_rejects = naive_rejects = longer_rejects = 0
     for rep in range(100):
-        blocky = np.repeat(rng.normal(size=n // 10), 10)
+        blocky = np.repeat(rng.normal(size=n // k), k)
         block_rejects += diagnose(blocky, cov, predicted, seed=rep).p_value["loading_split"] < 0.05
         naive_rejects += signature_statistic(blocky, w) > 1.96
+        longer = np.repeat(rng.normal(size=n // 10), 10)
+        longer_rejects += diagnose(longer, cov, predicted, seed=rep).p_value["loading_split"] < 0.05
     assert block_rejects <= 12  # Binomial(100, 0.05) exceeds 12 with probability 0.002
     assert naive_rejects >= 30
+    assert longer_rejects > 12
 
 
 def _cycle_covariates(pressures_pa, bins_per_half=50, dt_s=0.4):
@@ -370,6 +382,20 @@ def test_the_matched_direction_is_what_a_refit_of_the_base_cannot_absorb(monkeyp
     np.testing.assert_array_equal(w, np.where(tests == "load_cycle", 0.0, 1.0))
     with_branch = replace(fit, spec=model_spec((*DEFAULT_BASE, "viscoelastic_relaxation")))
     assert not np.any(workflow.matched_weights(with_branch, split)["relaxation"])
+    # every signature read along a direction belongs to exactly one physics effect, one the screen can add
+    for name in MATCHED:
+        owners = [e for e in LIBRARY.values() if e.signature == name]
+        assert len(owners) == 1 and owners[0].kind == "physics" and owners[0].name not in DEFAULT_BASE, name
+
+
+def test_sub_blocks_split_each_block_into_consecutive_runs_of_k_bins():
+    block = np.array([0, 0, 0, 0, 0, 1, 1, 1, 7, 7])
+    got = sub_blocks(block, 2)
+    # blocks of two within each original block, never across one
+    assert [len(set(got[block == b])) for b in (0, 1, 7)] == [3, 2, 1]
+    np.testing.assert_array_equal(np.diff(got) != 0, [0, 1, 0, 1, 1, 0, 1, 1, 0])
+    whole = sub_blocks(block, 10)  # k at least a block's length: the blocks themselves
+    np.testing.assert_array_equal(np.diff(whole) != 0, np.diff(block) != 0)
 
 
 def test_wilson_interval_known_values():

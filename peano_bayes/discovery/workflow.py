@@ -306,19 +306,19 @@ def own_evidence(evidence: dict, gates: Gates = Gates()) -> bool:
     return bool(p < gates.alpha and ratio <= gates.max_signature_ratio)
 
 
-def _statistic(r: np.ndarray, weights: dict, name: str) -> float:
-    return signature_statistic(r, weights[name], name in SQUARED, name in MATCHED)
+def _statistic(r: np.ndarray, diag: Diagnosis, name: str) -> float:
+    return signature_statistic(r, diag.weights[name], name in SQUARED, name in diag.one_sided)
 
 
-def matched_weights(current: ModelFit, split) -> dict[str, np.ndarray]:
-    """The :data:`~.diagnose.MATCHED` signatures' weights (name -> (n,) over the fitted bins) for a diagnosis of
-    ``current``: for the library effect each belongs to, :func:`~.fitting.matched_direction` from ``current`` to
-    the effect switched on at its screening start (:func:`effect_start`), on the tests the registry lists for it
-    (``Effect.shows_in``) and zero elsewhere; zero where the effect is already in the model (nothing to screen)
-    or its direction is not finite."""
+def matched_weights(current: ModelFit, split, names=MATCHED) -> dict[str, np.ndarray]:
+    """Weights (name -> (n,) over the fitted bins) of the signatures ``names`` (default :data:`~.diagnose.MATCHED`)
+    read along their effect's own direction, for a diagnosis of ``current``: for the physics effect each belongs
+    to, :func:`~.fitting.matched_direction` from ``current`` to the effect switched on at its screening start
+    (:func:`effect_start`), on the tests the registry lists for it (``Effect.shows_in``) and zero
+    elsewhere; zero where the effect is already in the model (nothing to screen) or its direction is not finite."""
     out = {}
-    for name in MATCHED:
-        effect = next(e for e in LIBRARY.values() if e.signature == name)
+    for name in names:
+        effect = next(e for e in LIBRARY.values() if e.signature == name and e.kind == "physics")
         n = split.n_fit_bins
         if effect.name in current.spec.active:
             out[name] = np.zeros(n)
@@ -343,12 +343,12 @@ def _score(
     delta_loglik = float(fit_eval.loglik.sum() - before_fit.loglik.sum())
     delta_k = fit.n_free - before.n_free
     delta_bic = -2.0 * (n_eff / n) * delta_loglik + delta_k * np.log(n_eff)
-    weights = diag.weights  # read after the refit along the directions the diagnosis read before it
+    # read after the refit along the directions the diagnosis read before it
     t_before = diag.statistic[effect.signature]
-    t_after = _statistic(fit_eval.r, weights, effect.signature)
+    t_after = _statistic(fit_eval.r, diag, effect.signature)
     flagged = [k for k in diag.p_holm if diag.p_holm[k] < gates.alpha]
     flagged_before = float(sum(diag.statistic[k] ** 2 for k in flagged))
-    flagged_after = float(sum(_statistic(fit_eval.r, weights, k) ** 2 for k in flagged))
+    flagged_after = float(sum(_statistic(fit_eval.r, diag, k) ** 2 for k in flagged))
     off = effect.off
     distance = _standardized_distance(fit, effect.strength, off)
     z_strength = {p: abs(distance.get(p, 0.0)) for p in effect.strength}
