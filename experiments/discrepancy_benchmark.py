@@ -223,6 +223,12 @@ def analyse(rows: list[dict], out: Path, pooled_from=()) -> dict:
         fp.append({"force_sd_n": sd, "n": n, "false_positive_rate": k / n, "wilson_low": lo, "wilson_high": hi})
     fp = pd.DataFrame(fp)
     fp.to_csv(out / "false_positives.csv", index=False)
+    # every null kind apart (own physics at each noise level, each other physics, drawn conditions, two mounts)
+    nulls = df[(df["effects"].map(len) == 0) & ~df["drift"]]
+    by_null = {}
+    for row_label, g in nulls.groupby("row"):
+        k, n = int(g["false_positive"].sum()), len(g)
+        by_null[row_label] = {"n": n, "false_positives": k, "wilson_high": wilson_interval(k, n)[1]}
     drift = df[df["drift"]]
     drift_ok = int(drift["correct"].sum())
     other = df[df["label"] == "none-veale"]  # the null on another physics (Veale's force-balance model)
@@ -253,6 +259,8 @@ def analyse(rows: list[dict], out: Path, pooled_from=()) -> dict:
         "other_physics_false_positive_rate": other_fp / len(other) if len(other) else None,
         "other_physics_false_positive_wilson_high": wilson_interval(other_fp, len(other))[1] if len(other) else None,
         "two_mount_null_false_positive_rate": mounted_fp / len(mounted) if len(mounted) else None,
+        "false_positives_by_null": by_null,
+        "false_positive_wilson_high_max_any_null": max((v["wilson_high"] for v in by_null.values()), default=None),
         "two_effects_exact": float(two["correct"].mean()) if len(two) else None,
         "gap_ratio_median_on_hits": float(hits["gap_ratio"].median()) if len(hits) else None,
         "gap_share_at_most_half_on_hits": float(np.mean(hits["gap_ratio"] <= 0.5)) if len(hits) else None,
