@@ -95,7 +95,10 @@ def main(argv=None) -> int:
     summary = {}
     for key in args.keys:
         case, seed = by_key[key], int(recorded[key]["seed"])
-        row = run_case(case, seed, {e: strengths[f"{e}@{case.snr:g}"] for e in case.effects})
+        # rows recorded before the base started at the inference least squares carry no base_start
+        from_ls = recorded[key].get("base_start") == "inference_least_squares"
+        chosen = {e: strengths[f"{e}@{case.snr:g}"] for e in case.effects}
+        row = run_case(case, seed, chosen, least_squares_start=from_ls)
         row = json.loads(json.dumps(row, default=float))  # as the run wrote it
         exact, numeric = differences(recorded[key], row)
         worst = sorted(numeric, key=lambda t: -t[1])[:3]

@@ -544,7 +544,9 @@ def run_key(case: Case, seed: int) -> str:
     return f"{case.label}|{case.snr:g}|{case.force_sd_n:g}|{int(case.drift)}|{seed}"  # mounts: in the label
 
 
-def run_case(case: Case, seed: int, strengths: dict, tests: tuple[str, ...] | None = None) -> dict:
+def run_case(
+    case: Case, seed: int, strengths: dict, tests: tuple[str, ...] | None = None, *, least_squares_start: bool = True
+) -> dict:
     """One benchmark run as a work unit of :func:`peano_bayes.app.fanout.run_units`: the hidden-effect dataset of
     ``case`` at ``seed`` (``strengths`` by effect), discovery on its ``tests`` (default: all it has), and its
     JSON-ready scored row (:func:`score`, :func:`truth_gap`, the report's verdict, named effects, noise model,
@@ -554,8 +556,15 @@ def run_case(case: Case, seed: int, strengths: dict, tests: tuple[str, ...] | No
     its own strengths (:func:`case_strengths`; ``strengths`` is not read) and its row records them
     (``strengths``) and the calibration's seconds; a drawn-condition row records the draw (``conditions``); the
     label names the physics. A row of a case with the default conditions and physics has the fields it always
-    had."""
-    from ..discovery import discover, discovery_data
+    had, and ``base_start``.
+
+    ``least_squares_start``: discovery's base fit starts at the inference least squares of the base model under
+    the material's bundled prior, as ``peano-bayes discover`` runs it for a user
+    (:func:`~peano_bayes.discovery.choice.base_least_squares`); False: discovery's own multi-start (how runs
+    before 2026-12-06 were made)."""
+    from ..discovery import DEFAULT_BASE, discover, discovery_data
+    from ..discovery.choice import base_least_squares
+    from ..inference.prior_files import load_prior
 
     extra = {}
     if case.own_calibration:
@@ -568,7 +577,12 @@ def run_case(case: Case, seed: int, strengths: dict, tests: tuple[str, ...] | No
     start = time.perf_counter()
     strengths = {e: strengths[e] for e in case.effects}
     dataset = hidden_dataset(case, seed, strengths)
-    result = discover(discovery_data(dataset, tests=tests), seed=seed)
+    split = discovery_data(dataset, tests=tests)
+    begin = None
+    if least_squares_start:
+        prior = load_prior(dataset.material.code)
+        begin = base_least_squares(dataset, DEFAULT_BASE, prior, specimen=split.specimen, tests=tests, seed=seed).params
+    result = discover(split, seed=seed, start=begin)
     row = score(case, result.report) | truth_gap(case, seed, result, strengths, tests)
     row.update(
         key=run_key(case, seed),
@@ -584,6 +598,7 @@ def run_case(case: Case, seed: int, strengths: dict, tests: tuple[str, ...] | No
         noise_model=result.report["noise_model"],
         screened=result.report["screened"],
         diagnoses=result.report["diagnoses"],
+        base_start=result.report["base_start"],
         seconds=time.perf_counter() - start,
         **extra,
     )
