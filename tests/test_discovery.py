@@ -661,7 +661,8 @@ def test_dense_jacobian_on_a_basis_of_the_free_directions_equals_the_full_one():
 def test_sensor_offset_and_gain_compete_with_physics_but_widening_noise_comes_last():
     """A passing sensor offset with the largest held-out gain is accepted before a passing physics effect (drift
     runs were named as relaxation when every noise model yielded); heteroscedastic noise, which can mimic any
-    misfit, only when nothing else passed, whatever its gain."""
+    misfit, only when nothing else passed, whatever its gain; a physics effect without its own signature's
+    evidence after every other."""
     from types import SimpleNamespace
 
     def passing(**gains):
@@ -678,6 +679,10 @@ def test_sensor_offset_and_gain_compete_with_physics_but_widening_noise_comes_la
         "hysteresis",
     ]
     assert names(passing(heteroscedastic_noise=5.0)) == ["heteroscedastic_noise"]
+    # a physics effect with its own signature's evidence comes before one without, whatever their gains
+    own = SimpleNamespace(name="nonlinear_damping", evidence={"delta_elpd": 138.7, "own_evidence": True})
+    other = SimpleNamespace(name="viscoelastic_relaxation", evidence={"delta_elpd": 140.6, "own_evidence": False})
+    assert names([other, own]) == ["nonlinear_damping", "viscoelastic_relaxation"]
 
 
 def test_a_significant_signature_reaches_every_candidate_the_registry_lists_for_it():
