@@ -198,7 +198,7 @@ _LIST = (
         {"parallel_maxwell1_k_n_per_m": 50.0, "parallel_maxwell1_tau_s": 1.0},
         ("parallel_maxwell1_k_n_per_m",),
         "relaxation",
-        ("step", "stroke"),
+        ("step",),
         {"parallel_maxwell1_tau_s": 1.0},
         model={"parallel_maxwell": 1},
         hidden_at=lambda s: {"parallel_maxwell1_k_n_per_m": 500.0 * s, "parallel_maxwell1_tau_s": 2.0},

@@ -324,7 +324,7 @@ def test_the_loaded_relaxation_signature_sees_a_decay_after_reversal_and_not_a_c
     assert loaded.p_holm["relaxation_at_load"] < 0.01
     at_rest = diagnose(rng.normal(size=n) + np.where(unloaded, 2.0 * decay, 0.0), cov, predicted, seed=103)
     assert at_rest.p_value["relaxation_at_load"] > 0.05
-    # without its matched weights (no step or stroke test, or the branch in the model) relaxation sees nothing
+    # without its matched weights (no step test, or the branch in the model) relaxation sees nothing
     assert at_rest.p_value["relaxation"] == 1.0 and at_rest.statistic["relaxation"] == 0.0
 
 
@@ -379,7 +379,7 @@ def test_the_matched_direction_is_what_a_refit_of_the_base_cannot_absorb(monkeyp
     monkeypatch.setattr(workflow, "matched_direction", lambda f, x, s: np.ones(n))
     w = workflow.matched_weights(fit, split)["relaxation"]
     assert LIBRARY["viscoelastic_relaxation"].scored_test == "step"
-    np.testing.assert_array_equal(w, np.where(tests == "load_cycle", 0.0, 1.0))
+    np.testing.assert_array_equal(w, np.where(tests == "step", 1.0, 0.0))
     with_branch = replace(fit, spec=model_spec((*DEFAULT_BASE, "viscoelastic_relaxation")))
     assert not np.any(workflow.matched_weights(with_branch, split)["relaxation"])
     # every signature read along a direction belongs to exactly one physics effect, one the screen can add
