@@ -21,7 +21,14 @@ the rigs share: sensor noise, checks, provenance), :mod:`.peano` (the rig on thi
 tests), :mod:`.conditions` (sampling rate and test pressure drawn per seed, for benchmarks).
 """
 
-from .conditions import CONDITIONS_STREAM, PRESSURE_RANGE_PA, RATE_RANGE_HZ, DrawnConditions, draw_conditions
+from .conditions import (
+    CONDITIONS_STREAM,
+    PRESSURE_RANGE_PA,
+    RATE_GRID_HZ,
+    RATE_RANGE_HZ,
+    DrawnConditions,
+    draw_conditions,
+)
 from .measure import MAX_FORCE_ERROR_N, MAX_POSITION_ERROR_M, RigSimulationError
 from .peano import simulate_dataset
 from .protocol import (
@@ -50,6 +57,7 @@ __all__ = [
     "MAX_POSITION_ERROR_M",
     "PRESSURE_RANGE_PA",
     "QUIRKS",
+    "RATE_GRID_HZ",
     "RATE_RANGE_HZ",
     "RIG_TESTS",
     "RigNoise",
