@@ -15,7 +15,7 @@ import numpy as np
 from ..data import Run
 from ..data.dataset import OPTIONAL_SIGNALS
 from ..errors import PeanoBayesError, PeanoBayesInputError, did_you_mean
-from .protocol import _NOISE_STREAM, RIG_TESTS, RigNoise, check_parameter
+from .protocol import _NOISE_STREAM, _SPECIMEN_STREAM, RIG_TESTS, RigNoise, check_parameter
 
 # --- physics drivers (jitted once per configuration) ----------------------------------------------------------
 
@@ -203,6 +203,24 @@ def _with_added(truth: _Truth, number: int, added: Mapping) -> _Truth:
             )
         changes[name] = base + delta
     return dataclasses.replace(truth, **changes)
+
+
+def _other_physics_runs(params, varying, truths_of, *, seed, specimens, spread, noise, repeats, added):
+    """The sessions of ``specimens`` specimens of another physics' model: each specimen multiplies the fields of
+    ``params`` (a parameter dataclass) named in ``varying`` by its own log-normal factor of sigma ``spread``
+    (stream ``[seed, _SPECIMEN_STREAM, index]``), ``truths_of(own parameters)`` gives its noise-free truths, and
+    :func:`_session_runs` measures them. Returns ``(base, runs, per_specimen)``: the parameters as a dict, the
+    runs, and label -> that specimen's parameters."""
+    base = {f.name: float(getattr(params, f.name)) for f in dataclasses.fields(params)}
+    runs, per_specimen = [], {}
+    for index in range(specimens):
+        label = string.ascii_uppercase[index]
+        rng = np.random.default_rng([seed, _SPECIMEN_STREAM, index])
+        own = {k: v * float(np.exp(spread * rng.standard_normal())) if k in varying else v for k, v in base.items()}
+        per_specimen[label] = own
+        truths = truths_of(type(params)(**own))
+        runs += _session_runs(label, index, truths, seed=seed, noise=noise, repeats=repeats, drift=False, added=added)
+    return base, runs, per_specimen
 
 
 def _session_runs(label: str, index: int, truths, *, seed: int, noise: RigNoise, repeats: int, drift: bool, added=None):

@@ -13,9 +13,7 @@ muscle (:data:`~peano_bayes.physics.VALIDATION_GEOMETRY`: w = 15 mm, l = 46 mm, 
 
 from __future__ import annotations
 
-import dataclasses
 import json
-import string
 from collections.abc import Iterable, Mapping
 from functools import partial
 
@@ -39,12 +37,12 @@ from .measure import (
     _check_run,
     _checked,
     _fill_optional,
+    _other_physics_runs,
     _provenance,
     _sample_times,
-    _session_runs,
     _Truth,
 )
-from .protocol import _SPECIMEN_STREAM, DEFAULT_NOISE, DEFAULT_PROTOCOL, RIG_TESTS, RigNoise, RigProtocol
+from .protocol import DEFAULT_NOISE, DEFAULT_PROTOCOL, RIG_TESTS, RigNoise, RigProtocol
 
 #: The tests the surface runs: all four.
 SURFACE_TESTS: tuple[str, ...] = RIG_TESTS
@@ -133,16 +131,17 @@ def simulate_surface_dataset(
     spec = materials.material(material)
     seed, repeats, specimens, tests = _check_run(seed, repeats, specimens, tests, specimen_spread)
     added = _check_added(added, tests, repeats)
-    base = {f.name: float(getattr(params, f.name)) for f in dataclasses.fields(params)}
-    runs, per_specimen = [], {}
-    for index in range(specimens):
-        label = string.ascii_uppercase[index]
-        rng = np.random.default_rng([seed, _SPECIMEN_STREAM, index])
-        own = {k: v * float(np.exp(specimen_spread * rng.standard_normal())) if k in SURFACE_VARYING else v
-               for k, v in base.items()}  # fmt: skip
-        per_specimen[label] = own
-        truths = _surface_truths(SurfaceParameters(**own), spec, protocol, tests)
-        runs += _session_runs(label, index, truths, seed=seed, noise=noise, repeats=repeats, drift=False, added=added)
+    base, runs, per_specimen = _other_physics_runs(
+        params,
+        SURFACE_VARYING,
+        lambda own: _surface_truths(own, spec, protocol, tests),
+        seed=seed,
+        specimens=specimens,
+        spread=specimen_spread,
+        noise=noise,
+        repeats=repeats,
+        added=added,
+    )
     model = {"model": "sarosi_type_surface", "parameters": json.dumps(base)}
     if "step" in tests:
         model["step_damping_ratio"] = repr(float(sarosi_damping_ratio(spec.test_pressure_pa)))

@@ -3,10 +3,8 @@ for data no model of peano_bayes generated."""
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
-import string
 from collections.abc import Iterable, Mapping
 from functools import partial
 
@@ -25,12 +23,12 @@ from .measure import (
     _check_run,
     _checked,
     _fill_optional,
+    _other_physics_runs,
     _provenance,
     _sample_times,
-    _session_runs,
     _Truth,
 )
-from .protocol import _SPECIMEN_STREAM, DEFAULT_NOISE, DEFAULT_PROTOCOL, RigNoise, RigProtocol
+from .protocol import DEFAULT_NOISE, DEFAULT_PROTOCOL, RigNoise, RigProtocol
 
 # --- the same protocol on another physics: Veale's force-balance model ------------------------------------------
 
@@ -146,16 +144,17 @@ def simulate_veale_dataset(
     if added is not None and n_conditions != 2:
         raise PeanoBayesInputError("added: give it with the default load-cycle pressures only")
     added = _check_added(added, tests, repeats)
-    base = {f.name: float(getattr(params, f.name)) for f in dataclasses.fields(params)}
-    runs, per_specimen = [], {}
-    for index in range(specimens):
-        label = string.ascii_uppercase[index]
-        rng = np.random.default_rng([seed, _SPECIMEN_STREAM, index])
-        own = {k: v * float(np.exp(specimen_spread * rng.standard_normal())) if k in VEALE_VARYING else v
-               for k, v in base.items()}  # fmt: skip
-        per_specimen[label] = own
-        truths = _veale_truths(type(params)(**own), spec, protocol, tests, cycle_pressures_pa)
-        runs += _session_runs(label, index, truths, seed=seed, noise=noise, repeats=repeats, drift=False, added=added)
+    base, runs, per_specimen = _other_physics_runs(
+        params,
+        VEALE_VARYING,
+        lambda own: _veale_truths(own, spec, protocol, tests, cycle_pressures_pa),
+        seed=seed,
+        specimens=specimens,
+        spread=specimen_spread,
+        noise=noise,
+        repeats=repeats,
+        added=added,
+    )
     provenance = _provenance(
         source="synthetic: Veale's force-balance model (peano_bayes.rig.simulate_veale_dataset), not a "
         "measurement and not peano_bayes' own physics",
