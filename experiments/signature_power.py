@@ -45,7 +45,7 @@ from peano_bayes import enable_compilation_cache
 from peano_bayes.atomic import write_text
 from peano_bayes.discovery import discovery_data
 from peano_bayes.discovery.diagnose import diagnose, sign_flip_p, sign_flips, signature_statistic
-from peano_bayes.discovery.fitting import evaluate, matched_direction
+from peano_bayes.discovery.fitting import evaluate, matched_directions
 from peano_bayes.discovery.model import DEFAULT_BASE
 from peano_bayes.discovery.workflow import Gates, effect_start, fit_base
 from peano_bayes.discovery.workflow import matched_weights as matched_weights_of
@@ -77,8 +77,9 @@ def signature_test(w: np.ndarray, r: np.ndarray, blocks: np.ndarray, flips: np.n
 def matched_weights(base, effects, split) -> dict[str, np.ndarray]:
     """Per effect, its standardized prediction change (n,) from the base fit to the screen's start, with the base
     fit's Jacobian columns (its free parameters, on the fitted bins) projected out
-    (:func:`~peano_bayes.discovery.fitting.matched_direction`, on every fitted test)."""
-    return {effect: matched_direction(base, effect_start(base, effect), split) for effect in effects}
+    (:func:`~peano_bayes.discovery.fitting.matched_directions`, on every fitted test)."""
+    rows = matched_directions(base, [effect_start(base, effect) for effect in effects], split)
+    return dict(zip(effects, rows, strict=True))
 
 
 def row_statistics(case, seed: int, strengths: dict) -> list[dict]:

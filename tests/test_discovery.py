@@ -348,7 +348,7 @@ def test_the_matched_relaxation_signature_is_one_sided_along_its_direction():
 
 
 def test_the_matched_direction_is_what_a_refit_of_the_base_cannot_absorb(monkeypatch):
-    """:func:`matched_direction` on a linear stand-in of the model: the prediction change with the base's Jacobian
+    """:func:`matched_directions` on a linear stand-in of the model: the prediction change with the base's Jacobian
     columns projected out, orthogonal to every one of them; :func:`matched_weights` keeps it on the effect's
     registered tests only and is zero once the effect is in the model."""
     from types import SimpleNamespace
@@ -371,12 +371,13 @@ def test_the_matched_direction_is_what_a_refit_of_the_base_cannot_absorb(monkeyp
     tests = np.array(["load_cycle"] * 20 + ["stroke"] * 20 + ["step"] * 20)
     split = SimpleNamespace(n_fit_bins=n, both=None, fit=None, fit_covariates=SimpleNamespace(test=tests))
     x1 = x0 + rng.normal(size=d)
-    got = fitting.matched_direction(fit, x1, split)
+    got, again = fitting.matched_directions(fit, [x1, x1], split)
+    np.testing.assert_array_equal(got, again)
     change = (sensitivity @ (x1 - x0))[:n]
     j = jac[:n][:, spec.mask]
     np.testing.assert_allclose(got, change - j @ np.linalg.lstsq(j, change, rcond=None)[0], atol=1e-10)
     np.testing.assert_allclose(j.T @ got, 0.0, atol=1e-9)
-    monkeypatch.setattr(workflow, "matched_direction", lambda f, x, s: np.ones(n))
+    monkeypatch.setattr(workflow, "matched_directions", lambda f, xs, s: np.ones((len(xs), n)))
     w = workflow.matched_weights(fit, split)["relaxation"]
     assert LIBRARY["viscoelastic_relaxation"].scored_test == "step"
     np.testing.assert_array_equal(w, np.where(tests == "step", 1.0, 0.0))

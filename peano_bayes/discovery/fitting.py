@@ -233,21 +233,25 @@ def gauss_newton_gain(spec: ModelSpec, start, data: DiscoveryData, current_cost:
     return float(current_cost - (np.sum(r**2) - np.sum((j @ step) ** 2)))
 
 
-def matched_direction(fit: ModelFit, x, split) -> np.ndarray:
-    """(n,) over ``split``'s fitted bins: the standardized change of the predictions when ``fit``'s point moves to
-    ``x`` (values (d,) [SI]; e.g. an effect switched on at its screening start), with the span of ``fit``'s own
-    Jacobian columns (its free parameters, on the fitted bins) projected out: what a refit of ``fit`` cannot
-    absorb. The direction a one-step score test of that move reads the residuals along. NaN where a simulation
-    or the Jacobian is not finite. Uses the programs :func:`evaluate` and the Laplace step already compiled."""
+def matched_directions(fit: ModelFit, xs, split) -> np.ndarray:
+    """(k, n) over ``split``'s fitted bins, one row per point of ``xs`` (k points, values (d,) [SI]; e.g. effects
+    switched on at their screening starts): the standardized change of the predictions when ``fit``'s point moves
+    there, with the span of ``fit``'s own Jacobian columns (its free parameters, on the fitted bins) projected out:
+    what a refit of ``fit`` cannot absorb, the direction a one-step score test of that move reads the residuals
+    along. NaN rows where a simulation is not finite, all NaN where the Jacobian is not. ``fit``'s residuals and
+    Jacobian are evaluated once for all points, with the programs :func:`evaluate` and the Laplace step compiled."""
     n = split.n_fit_bins
     base = np.asarray(pointwise(jnp.asarray(fit.x), split.both).r)[:n]
-    moved = np.asarray(pointwise(jnp.asarray(x, dtype=float), split.both).r)[:n]
-    d = base - moved  # (predicted with - predicted at the fit) / sd
     args = (jnp.asarray(fit.u), jnp.asarray(fit.spec.mask), jnp.asarray(fit.spec.pinned), split.fit)
     j = np.asarray(jacobian_of(*args)[0])[:n][:, fit.spec.mask]
-    if not (np.all(np.isfinite(j)) and np.all(np.isfinite(d))):
-        return np.full(n, np.nan)
-    return d - j @ np.linalg.lstsq(j, d, rcond=1e-10)[0]
+    out = np.full((len(xs), n), np.nan)
+    if not np.all(np.isfinite(j)):
+        return out
+    for row, x in enumerate(xs):
+        d = base - np.asarray(pointwise(jnp.asarray(x, dtype=float), split.both).r)[:n]  # (with - at the fit) / sd
+        if np.all(np.isfinite(d)):
+            out[row] = d - j @ np.linalg.lstsq(j, d, rcond=1e-10)[0]
+    return out
 
 
 def evaluate(fit: ModelFit, split) -> tuple[Evaluation, Evaluation]:
@@ -270,7 +274,7 @@ __all__ = [
     "fit_models",
     "gauss_newton_gain",
     "jacobian_of",
-    "matched_direction",
+    "matched_directions",
     "pointwise",
     "solve_batch",
 ]

@@ -81,7 +81,7 @@ from ..inference.fit import lag1_effective_size, noise_excess
 from ..physics import PARAMETERS
 from .data import SplitData
 from .diagnose import MATCHED, SQUARED, Diagnosis, diagnose, signature_statistic
-from .fitting import BATCH, Evaluation, ModelFit, evaluate, fit_models, gauss_newton_gain, matched_direction
+from .fitting import BATCH, Evaluation, ModelFit, evaluate, fit_models, gauss_newton_gain, matched_directions
 from .model import DEFAULT_BASE, NAMES, model_spec
 from .trend import joined_covariates, within_condition_trend
 
@@ -246,18 +246,18 @@ def _statistic(r: np.ndarray, diag: Diagnosis, name: str) -> float:
 def matched_weights(current: ModelFit, split, names=MATCHED) -> dict[str, np.ndarray]:
     """Weights (name -> (n,) over the fitted bins) of the signatures ``names`` (default :data:`~.diagnose.MATCHED`)
     read along their effect's own direction, for a diagnosis of ``current``: for the physics effect each belongs
-    to, :func:`~.fitting.matched_direction` from ``current`` to the effect switched on at its screening start
+    to, :func:`~.fitting.matched_directions` from ``current`` to the effect switched on at its screening start
     (:func:`effect_start`), on the tests the registry lists for it (``Effect.shows_in``) and zero
     elsewhere; zero where the effect is already in the model (nothing to screen) or its direction is not finite."""
+    n = split.n_fit_bins
+    owners = {name: next(e for e in LIBRARY.values() if e.signature == name and e.kind == "physics") for name in names}
+    screened = [name for name in names if owners[name].name not in current.spec.active]
+    starts = [effect_start(current, owners[name].name) for name in screened]
+    rows = dict(zip(screened, matched_directions(current, starts, split), strict=True)) if screened else {}
     out = {}
     for name in names:
-        effect = next(e for e in LIBRARY.values() if e.signature == name and e.kind == "physics")
-        n = split.n_fit_bins
-        if effect.name in current.spec.active:
-            out[name] = np.zeros(n)
-            continue
-        w = matched_direction(current, effect_start(current, effect.name), split)
-        where = np.isin(split.fit_covariates.test, effect.shows_in) & np.isfinite(w)
+        w = rows.get(name, np.zeros(n))
+        where = np.isin(split.fit_covariates.test, owners[name].shows_in) & np.isfinite(w)
         out[name] = np.where(where, w, 0.0)
     return out
 
