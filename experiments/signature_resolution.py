@@ -30,7 +30,7 @@ from discrepancy_benchmark import cases
 
 from peano_bayes import enable_compilation_cache
 from peano_bayes.discovery import discovery_data
-from peano_bayes.discovery.diagnose import diagnose
+from peano_bayes.discovery.diagnose import _holm, diagnose
 from peano_bayes.discovery.fitting import evaluate
 from peano_bayes.discovery.model import DEFAULT_BASE
 from peano_bayes.discovery.workflow import Gates, fit_base, matched_weights
@@ -53,21 +53,28 @@ def row(case, seed: int, strengths: dict, block_bins) -> dict:
     for label, k, weights in arms:
         cov = split.fit_covariates
         d = diagnose(fit_eval.r, cov, fit_eval.predicted, alpha=Gates.alpha, seed=seed, matched=weights, block_bins=k)
-        out["by_block"][label] = {s: {"T": d.statistic[s], "p_holm": d.p_holm[s]} for s in signatures}
+        out["by_block"][label] = {
+            s: {"T": d.statistic[s], "p": d.p_value[s], "p_holm": d.p_holm[s]} for s in signatures
+        }
     return out
 
 
 def summary(rows: list[dict]) -> dict:
-    """case -> block bins -> sessions, share with the hidden effect's signature significant, share with any
-    physics signature significant."""
+    """case -> arm -> sessions, share with the hidden effect's signature significant, share with any physics
+    signature significant. Each arm also as ``<arm>/physics``: Holm over the physics signatures alone (the claims
+    that name an effect), from the raw p-values (rows that recorded them)."""
     out: dict = {}
     for r in rows:
         effects = [e for e in LIBRARY if r["case"] == e]
         for k, sig in r["by_block"].items():
-            cell = out.setdefault(r["case"], {}).setdefault(k, {"sessions": 0, "own": 0, "any": 0})
-            cell["sessions"] += 1
-            cell["own"] += int(bool(effects) and sig[LIBRARY[effects[0]].signature]["p_holm"] < Gates.alpha)
-            cell["any"] += int(any(v["p_holm"] < Gates.alpha for v in sig.values()))
+            families = [(k, {s: v["p_holm"] for s, v in sig.items()})]
+            if all("p" in v for v in sig.values()):
+                families.append((f"{k}/physics", _holm({s: v["p"] for s, v in sig.items()})))
+            for label, p_holm in families:
+                cell = out.setdefault(r["case"], {}).setdefault(label, {"sessions": 0, "own": 0, "any": 0})
+                cell["sessions"] += 1
+                cell["own"] += int(bool(effects) and p_holm[LIBRARY[effects[0]].signature] < Gates.alpha)
+                cell["any"] += int(any(p < Gates.alpha for p in p_holm.values()))
     return out
 
 

@@ -1125,3 +1125,31 @@ def test_the_report_names_no_cause_without_the_trend_test_and_says_when_the_base
     assert "`series_viscoelastic` improved the prediction" in described and "not named as physics" in described
     unconverged = report_markdown({**base, "verdict": "unconverged", "described": []})
     assert "not screened" in unconverged and "neither met its tolerance" in unconverged
+
+
+def test_an_effect_with_its_own_evidence_is_withheld_while_structure_is_left():
+    # the surface null of the tuning round: a load damper passed every gate, its own signature included, and the
+    # model with it still missed the data far beyond the noise
+    from peano_bayes.discovery.report import report_markdown
+    from peano_bayes.discovery.workflow import withhold_where_structure_is_left
+
+    steps = [
+        {"effect": "nonlinear_damping", "kind": "physics", "named": True},
+        {"effect": "sensor_offset", "kind": "noise", "named": False},
+        {"effect": "session_baseline", "kind": "flexible", "named": False},
+    ]
+    fits = withhold_where_structure_is_left(steps, structure_left=False)
+    assert [s["named"] for s in fits] == [True, False, False] and not any(s["withheld"] for s in fits)
+    left = withhold_where_structure_is_left(steps, structure_left=True)
+    assert [s["named"] for s in left] == [False, False, False]
+    assert [s["withheld"] for s in left] == [True, False, False]  # only what would have been named
+    assert steps[0]["named"] is True  # the input is not changed
+
+    base = {
+        "specimen": "A", "named": [], "ambiguous": [], "noise_model": [], "base": ["tensile_stiffness"],
+        "final_model": ["tensile_stiffness", "nonlinear_damping"], "steps": [], "gap": {"before": {}, "after": {}},
+        "screened": [], "gates": {}, "verdict": "unexplained",
+    }  # fmt: skip
+    text = report_markdown({**base, "described": ["nonlinear_damping"], "withheld": ["nonlinear_damping"]})
+    assert "`nonlinear_damping` had its own signature's evidence" in text and "is not named" in text
+    assert "improved the prediction of the held-out runs, but its own residual signature was not" not in text

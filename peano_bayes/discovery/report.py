@@ -136,6 +136,11 @@ def _evidence_phrase(step: dict) -> str:
         return "not physics, never named"
     if step.get("named", True):
         return "significant before and halved or more after, so it is named"
+    if step.get("withheld", False):
+        return (
+            "significant before and halved or more after, but the model with it still misses the data beyond the "
+            "noise, so it is not named"
+        )
     return "not significant before, or not halved after, so it is not named"
 
 
@@ -145,7 +150,9 @@ def report_markdown(report: dict) -> str:
     verdict = report["verdict"]
     # what the final model needed without naming it: the session baseline, or physics without its own evidence
     described_baseline = [d for d in report["described"] if d in flexible_terms()]
-    described_physics = [d for d in report["described"] if d not in flexible_terms()]
+    # (effects withheld for the structure left are said apart)
+    withheld = report.get("withheld", [])
+    described_physics = [d for d in report["described"] if d not in flexible_terms() and d not in withheld]
     if verdict == "named":
         lines.append(f"**Verdict: the data show {', '.join(report['named'])}**, which the base model lacked.")
     elif verdict == "ambiguous":
@@ -178,6 +185,14 @@ def report_markdown(report: dict) -> str:
                 "below), but the repeats of each test condition show no trend in time: the misfit is ordered with "
                 "the conditions (here, pressure) as much as with time, and no cause is named. Repeating a condition "
                 "at the end of the session would tell a drift from a pressure-dependent misfit."
+            )
+        elif withheld:
+            lines.append(
+                "**Verdict: unexplained.** The residuals keep structure that no effect in the library removes. "
+                + ", ".join(f"`{d}`" for d in withheld)
+                + " had its own signature's evidence and reduced the misfit, but the model with it still misses the "
+                "data beyond the noise (see the last diagnosis below), so it may stand for part of a misfit outside "
+                "the library and is not named. Look at the residual figure for the shape that is left."
             )
         else:
             lines.append(
