@@ -257,15 +257,20 @@ def test_signature_test_respects_block_structure():
     # longer stretches than a block is what the test cannot absorb: over ten bins it rejects too often.
     k = SIGNATURE_BLOCK_BINS
     w = cov.rate_sign / np.sqrt(n)
+    ids = np.unique(sub_blocks(cov.block, k), return_inverse=True)[1]  # the test's own blocks
     block_rejects = naive_rejects = longer_rejects = 0
     for rep in range(100):
-        blocky = np.repeat(rng.normal(size=n // k), k)
+        blocky = rng.normal(size=ids.max() + 1)[ids]
         block_rejects += diagnose(blocky, cov, predicted, seed=rep).p_value["loading_split"] < 0.05
         naive_rejects += signature_statistic(blocky, w) > 1.96
         longer = np.repeat(rng.normal(size=n // 10), 10)
         longer_rejects += diagnose(longer, cov, predicted, seed=rep).p_value["loading_split"] < 0.05
     assert block_rejects <= 12  # Binomial(100, 0.05) exceeds 12 with probability 0.002
-    assert naive_rejects >= 30
+    # an i.i.d. z-test of k-bin-constant noise: |Z| sqrt(k) > 1.96, probability 2 sf(1.96 / sqrt(k)) (0.26 at k 3)
+    from scipy import stats
+
+    naive_p = 2 * stats.norm.sf(1.96 / np.sqrt(k))
+    assert naive_rejects >= stats.binom.ppf(0.002, 100, naive_p) > 12
     assert longer_rejects > 12
 
 

@@ -51,13 +51,14 @@ tuning rounds left structure behind.
 (:func:`fit_base`): nothing is screened or named, since a candidate would be judged against an unfinished fit;
 otherwise the physics effects named (``named``); ``ambiguous`` when a rival of a known confusable pair
 (:data:`~peano_bayes.effects.CONFUSABLE`) passed every gate with an elpd within two standard errors of the winner
-(the rivals and the experiment that separates them are reported; a passing candidate outside such a pair is
-screened again once the winner is in the model and, if it too came within two standard errors, is reported in the
-step's ``close_calls``, so the engineer sees the tie without the verdict changing); ``unexplained`` when structure
-is left and no candidate passes (whatever was accepted on the way: see above), or when the flexible session baseline or a physics effect without its own evidence
-was needed and nothing was named; ``none`` otherwise. A drift is claimed (``drift_shown``) only when the residuals
-the session baseline absorbed trend in time within test conditions (:func:`~.trend.within_condition_trend`, the baseline
-step's ``time_check``); otherwise the report says the misfit is ordered with the conditions.
+(the rivals and the experiment that separates them are reported; a passing candidate outside such a pair is screened
+again once the winner is in the model and, if it too came within two standard errors, is reported in the step's
+``close_calls``, so the engineer sees the tie without the verdict changing); ``unexplained`` when structure is left
+and no candidate passes (whatever was accepted on the way: see above), or when the flexible session baseline or a
+physics effect without its own evidence was needed and nothing was named; ``none`` otherwise. A drift is claimed
+(``drift_shown``) only when the residuals the session baseline absorbed trend in time within test conditions
+(:func:`~.trend.within_condition_trend`, the baseline step's ``time_check``); otherwise the report says the misfit
+is ordered with the conditions.
 Noise-side effects that pass are added and reported as the noise model, never as physics.
 
 **Which passing candidate is accepted:** the one with the largest held-out gain among the physics effects, the
