@@ -214,14 +214,14 @@ def analyse(rows: list[dict], out: Path, pooled_from=()) -> dict:
         k, n = int(g["correct"].sum()), len(g)
         lo, hi = wilson_interval(k, n)
         recall.append({"effect": label, "snr": snr, "n": n, "recall": k / n, "wilson_low": lo, "wilson_high": hi})
-    recall = pd.DataFrame(recall)
+    recall = pd.DataFrame(recall, columns=["effect", "snr", "n", "recall", "wilson_low", "wilson_high"])
     recall.to_csv(out / "recall.csv", index=False)
     fp = []
     for sd, g in df[(df["label"] == "none") & ~df["drift"]].groupby("force_sd_n"):
         k, n = int(g["false_positive"].sum()), len(g)
         lo, hi = wilson_interval(k, n)
         fp.append({"force_sd_n": sd, "n": n, "false_positive_rate": k / n, "wilson_low": lo, "wilson_high": hi})
-    fp = pd.DataFrame(fp)
+    fp = pd.DataFrame(fp, columns=["force_sd_n", "n", "false_positive_rate", "wilson_low", "wilson_high"])
     fp.to_csv(out / "false_positives.csv", index=False)
     # every null kind apart (own physics at each noise level, each other physics, drawn conditions, two mounts)
     nulls = df[(df["effects"].map(len) == 0) & ~df["drift"]]
@@ -241,11 +241,12 @@ def analyse(rows: list[dict], out: Path, pooled_from=()) -> dict:
     gap["share_at_most_0.5"] = hits.groupby("row")["gap_ratio"].apply(lambda s: float(np.mean(s <= 0.5)))
     if "gap_test" in hits:
         gap["scored_test"] = hits.groupby("row")["gap_test"].first()
-    if "truth_gap" in df:  # what is left of each effect after the base refit, beside its nominal SNR
-        effective = df[df["effects"].map(len) == 1].apply(
+    single = df[df["effects"].map(len) == 1]
+    if "truth_gap" in df and len(single):  # what is left of each effect after the base refit, beside its nominal SNR
+        effective = single.apply(
             lambda r: (r["truth_gap"] or {}).get(r["effects"][0], {}).get("effective_snr", np.nan), axis=1
         )
-        gap["effective_snr_median"] = effective.groupby(df["row"]).median()
+        gap["effective_snr_median"] = pd.to_numeric(effective).groupby(single["row"]).median()
     gap.to_csv(out / "gap.csv")
     high = recall[recall["snr"] >= 2]
     figures = {

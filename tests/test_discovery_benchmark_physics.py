@@ -182,3 +182,29 @@ def test_the_benchmark_script_adds_the_new_cases_only_when_asked_and_finds_their
     for case in wide:
         row = {"key": run_key(case, 15001), "seed": 15001, "snr": case.snr, "force_sd_n": case.force_sd_n}
         assert bench.case_of_row(row) == case
+
+
+def test_the_analysis_counts_a_run_of_drawn_cases_without_a_fixed_protocol_null(tmp_path):
+    # a final run on drawn conditions has no "none" label (its null is "none@drawn") and may have no detection yet
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).parents[1] / "experiments"))
+    import discrepancy_benchmark as bench
+
+    def row(label, effects, named, correct, physics_fp=False):
+        return {
+            "label": label, "effects": effects, "snr": 2.0 if effects else 0.0, "force_sd_n": 0.2, "drift": False,
+            "seed": 15000, "outcome": "+".join(named) or "none", "correct": correct, "false_positive": physics_fp,
+            "gap_ratio": 0.3 if correct and effects else None, "truth_gap": None,
+        }  # fmt: skip
+
+    nulls = [row("none@drawn", [], [], True), row("none-surface@drawn", [], ["nonlinear_damping"], False, True)]
+    figures = bench.analyse(nulls, tmp_path)
+    assert figures["false_positives_by_null"]["none@drawn"] == {
+        "n": 1, "false_positives": 0, "wilson_high": pytest.approx(0.7935, abs=1e-4)
+    }  # fmt: skip
+    assert figures["false_positives_by_null"]["none-surface@drawn"]["false_positives"] == 1
+    hit = row("hysteresis-veale@drawn", ["hysteresis"], ["hysteresis"], True)
+    figures = bench.analyse([*nulls, hit, row("hysteresis-veale@drawn", ["hysteresis"], [], False)], tmp_path)
+    assert figures["recall_by_effect_snr_ge_2"] == {"hysteresis-veale@drawn@2": 0.5}
