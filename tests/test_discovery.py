@@ -457,6 +457,7 @@ def test_benchmark_runs_name_nothing_on_a_null_and_no_physics_for_drift():
     null = run_case(Case(), 110, {}, tests=LOAD_CYCLES)
     assert null["verdict"] == "none" and null["correct"] and not null["false_positive"], null["outcome"]
     assert null["base_start"] == "inference_least_squares"  # as `discover` runs it for a user
+    assert null["withheld"] == []  # recorded: what had its own evidence but was not named for structure left
     drift = run_case(Case(drift=True), 110, {}, tests=LOAD_CYCLES)
     assert drift["verdict"] in ("none", "unexplained") and not drift["named"], drift["outcome"]
     assert drift["correct"] == (drift["verdict"] == "unexplained" and drift["drift_shown"])

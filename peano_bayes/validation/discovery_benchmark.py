@@ -594,6 +594,7 @@ def run_case(
         verdict=result.report["verdict"],
         named=result.report["named"],
         described=result.report["described"],
+        withheld=result.report["withheld"],
         drift_shown=result.report["drift_shown"],
         noise_model=result.report["noise_model"],
         screened=result.report["screened"],
