@@ -89,8 +89,8 @@ def decay_after_reversal(cov: Covariates) -> np.ndarray:
 #: (``Effect.shows_in``), zero elsewhere (:func:`~peano_bayes.discovery.workflow.matched_weights`). One-sided: a
 #: physics effect's strength is >= 0, so it explains residuals along its direction, not against it. Each belongs to
 #: exactly one physics effect outside the default base. The fixed patterns below are what :func:`diagnose` reads
-#: when no direction is given (``relaxation`` has none: zero). Why: read as fixed patterns with the sign-flip
-#: blocks of :data:`SIGNATURE_BLOCK_BINS`, the hidden effect's own signature was significant after Holm in 0 of 3
+#: when no direction is given (``relaxation`` has none: zero). Why: read as fixed patterns with sign-flip
+#: blocks of five or ten bins, the hidden effect's own signature was significant after Holm in 0 of 3
 #: tuning sessions for five of the eight target effects (relaxation, whose load-cycle pattern was replaced first,
 #: 3 of 3); read along their own directions, in 3 of 3 for seven of them, with no physics signature significant
 #: on either null (docs/validation.md, *Tuning the signatures*). The mount's ``force_level`` is shared with the
@@ -105,9 +105,11 @@ MATCHED = frozenset(
 #: confined to a few ramps' first seconds could not be significant at 0.01 however large its ``T``. The test keeps
 #: its level for noise correlated over at most this many bins. Three: in 13 tuning sessions a case the hidden
 #: effect's own signature was significant after Holm in every session for seven of the eight target effects (at
-#: five bins flow restriction missed one at Holm p 0.046 and others sat near 0.01), and no physics signature was
-#: on either null (smallest Holm p 0.13); two bins let a signature through on Veale's null in one of three
-#: sessions of an earlier round (docs/validation.md, *Tuning the signatures*).
+#: five bins flow restriction missed one at Holm p 0.046 and the series unit reached 0.0078); Veale's null stayed
+#: quiet at five, three and two bins (smallest Holm p 0.26), and the own null as at five (12 of 13; the thirteenth
+#: showed ``first_cycle`` at T 9 at every block length). The risk is longer correlation: before relaxation was
+#: read on the step alone, three-bin blocks let its stroke direction through on Veale's null (Holm p 0.004-0.007;
+#: docs/validation.md, *Tuning the signatures*).
 SIGNATURE_BLOCK_BINS = 3
 
 

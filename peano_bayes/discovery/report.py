@@ -138,10 +138,35 @@ def _evidence_phrase(step: dict) -> str:
         return "significant before and halved or more after, so it is named"
     if step.get("withheld", False):
         return (
-            "significant before and halved or more after, but the model with it still misses the data beyond the "
-            "noise, so it is not named"
+            "significant before and halved or more after, but the final model still leaves a residual signature "
+            "significant after Holm, so it is not named"
         )
     return "not significant before, or not halved after, so it is not named"
+
+
+def _left_phrase(report: dict) -> str:
+    """The signatures still significant after Holm in the last diagnosis, with their ``T``, in words."""
+    alpha = report.get("gates", {}).get("alpha", 0.01)
+    last = (report.get("diagnoses") or [{}])[-1].get("signatures", {})
+    left = sorted((k for k, v in last.items() if v["p_holm"] < alpha), key=lambda k: -last[k]["T"])
+    if not left:
+        return "no signature recorded"
+    return "significant after Holm: " + ", ".join(f"`{k}` T {last[k]['T']:.1f}" for k in left)
+
+
+def _withheld_sentence(withheld: list) -> str:
+    one = len(withheld) == 1
+    return (
+        ", ".join(f"`{d}`" for d in withheld)
+        + (" had its" if one else " had their")
+        + " own signature's evidence and reduced the misfit, but the model with "
+        + ("it" if one else "them")
+        + " still leaves a residual signature significant after Holm, so "
+        + ("it" if one else "they")
+        + " may stand for part of a misfit outside the library and "
+        + ("is" if one else "are")
+        + " not named. Look at the residual figure for the shape that is left."
+    )
 
 
 def report_markdown(report: dict) -> str:
@@ -188,17 +213,16 @@ def report_markdown(report: dict) -> str:
             )
         elif withheld:
             lines.append(
-                "**Verdict: unexplained.** The residuals keep structure that no effect in the library removes. "
-                + ", ".join(f"`{d}`" for d in withheld)
-                + " had its own signature's evidence and reduced the misfit, but the model with it still misses the "
-                "data beyond the noise (see the last diagnosis below), so it may stand for part of a misfit outside "
-                "the library and is not named. Look at the residual figure for the shape that is left."
+                "**Verdict: unexplained.** The residuals keep structure that the search did not remove "
+                f"({_left_phrase(report)})."
             )
         else:
             lines.append(
                 "**Verdict: unexplained.** The residuals keep structure that no effect in the library explains on "
                 "its own evidence. Look at the residual figure for its shape; no cause is named."
             )
+        if withheld:
+            lines.append("\n" + _withheld_sentence(withheld))
         if described_physics:
             lines.append(
                 "\n" + ", ".join(f"`{d}`" for d in described_physics) + " improved the prediction of the held-out "

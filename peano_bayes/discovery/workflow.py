@@ -39,13 +39,13 @@ Kelvin-Voigt unit passed every gate on predictive gain alone while its signature
 significant).
 
 **Named only where the model with them fits** (``withheld``): when structure is still left after the loop stops
-(some signature significant after Holm that no library candidate removes), effects that had their own evidence
-are not named either; they are reported as ``withheld`` and among ``described``, and the verdict is
-``unexplained``. Structure outside the library means a base that misses the data, and an effect accepted on the
-way may stand for part of that miss: on a Sarosi-type surface with nothing hidden, the base missed the step by
-``T`` 846 and a load damper passed every gate, its own signature included, yet the model with it still missed
-by ``T`` 285 (docs/validation.md, *Discovery benchmark*). On the project's own physics no correct detection of the
-tuning rounds left structure behind.
+(some signature significant after Holm, whether no library candidate passed or the budget of ``max_effects`` was
+spent), effects that had their own evidence are not named either, nor is a confusable pair called ambiguous; they
+are reported as ``withheld`` and among ``described``, and the verdict is ``unexplained``. Structure outside the
+library means a base that misses the data, and an effect accepted on the way may stand for part of that miss: on a
+Sarosi-type surface with nothing hidden, the base missed the step by ``T`` 846 and a load damper passed every gate,
+its own signature included, yet the model with it still missed by ``T`` 285 (docs/validation.md, *Discovery
+benchmark*). On the project's own physics no correct detection of the tuning rounds left structure behind.
 
 **Verdicts:** ``unconverged`` when the base model's least squares neither met its tolerance nor stopped improving
 (:func:`fit_base`): nothing is screened or named, since a candidate would be judged against an unfinished fit;
@@ -415,6 +415,7 @@ def preference_order(passing: list) -> list:
     would only describe the misfit, comes after them: it is accepted only when none of them passed. Why: a load
     damping with its own signature at T 24 (Holm p 0.001) lost by 1.9 in held-out elpd to a Maxwell branch
     whose signature was not significant (p 0.27), and the verdict was ``unexplained`` (tuning seed 20009)."""
+
     def tier(c) -> int:
         return int(LIBRARY[c.name].kind == "physics" and not c.evidence.get("own_evidence", False))
 
@@ -431,6 +432,41 @@ def withhold_where_structure_is_left(steps: list[dict], structure_left: bool) ->
         s | {"withheld": bool(s["named"] and structure_left), "named": bool(s["named"] and not structure_left)}
         for s in steps
     ]
+
+
+def conclude(steps: list[dict], structure_left: bool, settled: bool = True) -> tuple[list[dict], dict]:
+    """The verdict of a finished search: its accepted ``steps`` (marked by :func:`withhold_where_structure_is_left`)
+    and the report's ``verdict``, ``named``, ``described``, ``withheld``, ``drift_shown`` and ``ambiguous``, from
+    the steps, whether the last diagnosis left structure and whether the base fit ``settled``. A withheld winner
+    of a confusable pair is not ``ambiguous`` either: nothing is named while structure is left."""
+    steps = withhold_where_structure_is_left(steps, structure_left)
+    named = [s["effect"] for s in steps if s["named"]]
+    # a flexible term, or a physics effect that passed the gates without its own signature's evidence (or withheld)
+    described = [s["effect"] for s in steps if s["kind"] == "flexible" or (s["kind"] == "physics" and not s["named"])]
+    ambiguous = [
+        {"effects": [s["effect"], *s["rivals"]], "experiment": s["experiment"]}
+        for s in steps
+        if s["rivals"] and s["named"]
+    ]
+    if not settled:
+        verdict = "unconverged"
+    elif ambiguous:
+        verdict = "ambiguous"
+    elif named:
+        verdict = "named"
+    elif described or structure_left:
+        verdict = "unexplained"
+    else:
+        verdict = "none"
+    return steps, {
+        "verdict": verdict,
+        "named": named,
+        "described": described,
+        "withheld": [s["effect"] for s in steps if s["withheld"]],
+        # drift is claimed only where the repeats of a condition show the trend in time (not only its order)
+        "drift_shown": any(s["time_check"]["shows_in_time"] for s in steps if s["kind"] == "flexible"),
+        "ambiguous": ambiguous,
+    }
 
 
 def refit_candidates(inactive, gain: dict, p_holm: dict, gates: Gates) -> tuple[list, dict]:
@@ -505,8 +541,10 @@ def discover(
     value [SI], the inference least squares' optimum) replaces them (:func:`fit_base`).
 
     The report (:attr:`Discovery.report`) is a JSON-ready dict: ``verdict`` (one of :data:`VERDICTS`),
-    ``named`` physics effects, ``noise_model`` noise-side effects, ``described`` flexible terms the data needed,
-    ``ambiguous`` rival sets with the experiment that separates them,
+    ``named`` physics effects, ``noise_model`` noise-side effects, ``described`` flexible terms and physics
+    effects the data needed without naming them, ``withheld`` those of them that had their own evidence but were
+    not named for the structure left (:func:`conclude`), ``ambiguous`` rival sets with the experiment that
+    separates them,
     ``steps`` (per accepted effect: evidence, gates, parameters with Laplace sd, RMSE before and after, the
     ``rivals`` of a confusable pair and other ``close_calls`` within two standard errors),
     ``screened`` (every candidate's evidence per iteration), ``signatures`` (per iteration, each significant
@@ -604,36 +642,10 @@ def discover(
         current, cur_fit, cur_held = best.fit, best.fit_eval, best.held_eval
         diag = _diagnose(current, cur_fit, split, gates, seed)
         diagnoses.append(_diagnosis_dict(diag))
-    steps = withhold_where_structure_is_left(steps, diag.structure_left)
-    withheld = [s["effect"] for s in steps if s["withheld"]]
-    named = [s["effect"] for s in steps if s["named"]]
-    # a flexible term, or a physics effect that passed the gates without its own signature's evidence
-    described = [s["effect"] for s in steps if s["kind"] == "flexible" or (s["kind"] == "physics" and not s["named"])]
-    # drift is claimed only where the repeats of a condition show the trend in time (not only its order)
-    drift = any(s["time_check"]["shows_in_time"] for s in steps if s["kind"] == "flexible")
-    ambiguous = [
-        {"effects": [s["effect"], *s["rivals"]], "experiment": s["experiment"]}
-        for s in steps
-        if s["rivals"] and s["named"]
-    ]
-    if not settled:
-        verdict = "unconverged"
-    elif ambiguous:
-        verdict = "ambiguous"
-    elif named:
-        verdict = "named"
-    elif described or diag.structure_left:
-        verdict = "unexplained"
-    else:
-        verdict = "none"
+    steps, outcome = conclude(steps, diag.structure_left, settled)
     report = {
-        "verdict": verdict,
-        "named": named,
+        **outcome,
         "noise_model": [s["effect"] for s in steps if s["kind"] == "noise"],
-        "described": described,
-        "withheld": withheld,
-        "drift_shown": drift,
-        "ambiguous": ambiguous,
         "structure_left": bool(diag.structure_left),
         "stopped": stopped,
         "base": list(base),
@@ -672,4 +684,5 @@ __all__ = [
     "within_condition_trend",
     "within_two_se",
     "withhold_where_structure_is_left",
+    "conclude",
 ]

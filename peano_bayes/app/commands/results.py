@@ -229,7 +229,7 @@ def discover_command(args):
     from ...data import load
     from ...discovery import DEFAULT_BASE, Gates, discover, discovery_data, write_report
     from ...discovery.choice import base_least_squares
-    from ...effects import check_effects
+    from ...effects import check_effects, flexible_terms
     from ..pipeline import prior_of
 
     named = None if args.base is None else [name.strip() for name in args.base.split(",") if name.strip()]
@@ -272,8 +272,14 @@ def discover_command(args):
     written = write_report(result, Path(args.out))
     report = result.report
     say(f"verdict: {report['verdict']}" + (f" ({', '.join(report['named'])})" if report["named"] else ""))
-    if report["described"]:
-        say(f"slow structure over the session, described by {', '.join(report['described'])}, names no effect")
+    flexible = [d for d in report["described"] if d in flexible_terms()]
+    unnamed = [d for d in report["described"] if d not in flexible and d not in report.get("withheld", [])]
+    if flexible:
+        say(f"slow structure over the session, described by {', '.join(flexible)}, names no effect")
+    if unnamed:
+        say(f"described without its own signature's evidence, not named: {', '.join(unnamed)}")
+    if report.get("withheld"):
+        say(f"not named while structure is left that the library does not remove: {', '.join(report['withheld'])}")
     say(f"wrote {', '.join(str(p) for p in written)}")
     return report
 
