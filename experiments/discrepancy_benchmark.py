@@ -15,8 +15,10 @@ are in the git history of ``experiments/``, e.g. ``git log --stat -- experiments
 the current workflow is ``discrepancy-14000/`` (seeds 14000-14039, SNR 2, every case; code 1d9ce14), with its
 ``PREREGISTRATION.md``; the final runs of the version before (``discrepancy-10000/``, SNR 2, and
 ``discrepancy-11000/``, SNR 4) are at ``72e5f45:experiments/``, and two final runs of this version (seeds
-12000-12039 and 13000-13039) were stopped before any table and withdrawn (that file says why). A later workflow
-change's final run starts at ``--first-seed 15000``; tuning seeds from 20002.
+12000-12039 and 13000-13039) were stopped before any table and withdrawn (that file says why). The third
+version's final run is ``discrepancy-15000/`` (seeds 15000-15039, drawn conditions, three physics; its
+``PREREGISTRATION.md``); a later workflow change's final run starts at ``--first-seed 16000``. Tuning seeds
+20002-20025 are spent; new tuning starts at 20026.
 
 Runs are work units of ``peano_bayes.app.fanout`` (``--jobs`` local processes, or a Dask cluster with
 ``--scheduler``). Resumable: this process appends every finished run as one line of ``OUT/runs.jsonl``; a rerun
