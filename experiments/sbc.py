@@ -39,6 +39,7 @@ from peano_bayes.validation.sbc import (
     RANK_DRAWS,
     base_posterior,
     coverage_table,
+    pooled_rule,
     rank_names,
     replicate_unit,
 )
@@ -119,6 +120,19 @@ def markdown(
         verdict = "within target" if TARGET[0] <= c90 <= TARGET[1] else "MISS"
         lines.append(f"| {row['parameter']} | " + " | ".join(cells) + f" | {row['rank_chi2_p']:.3f} | {verdict} |")
     return "\n".join(lines) + "\n"
+
+
+def rule_markdown(rule: dict) -> str:
+    """The pooled rule's verdict in words (:func:`~peano_bayes.validation.sbc.pooled_rule`)."""
+    low, high = rule["pooled_wilson95"]
+    rejected = ", ".join(rule["rank_rejected"]) or "none"
+    return (
+        f"**Pooled rule** (pre-registered for the SBC of what users run): {rule['level']:.0%} coverage pooled over "
+        f"every quantity and replicate {rule['pooled_coverage']:.3f} [{low:.3f}, {high:.3f}], band "
+        f"{rule['band'][0]:.2f}-{rule['band'][1]:.2f}; rank histograms rejected at Holm-corrected 0.01: {rejected} "
+        f"(smallest Holm p {min(rule['rank_p_holm'].values()):.3f}); {rule['unconverged']} replicates unconverged, "
+        f"counted as they are. **{'Passed' if rule['passed'] else 'Failed'}.**\n"
+    )
 
 
 def rank_figure(replicates: list[dict], names, path: Path) -> None:
@@ -206,6 +220,8 @@ def main(argv=None) -> int:
         markdown(rows, replicates, args.seed, seconds, args.exact_inputs, args.specimens, args.as_fit),
     )
     rank_figure(replicates, names, args.out / "ranks")
+    rule = pooled_rule(rows, replicates)
+    write_text(args.out / "SBC.md", (args.out / "SBC.md").read_text() + "\n" + rule_markdown(rule))
     print((args.out / "SBC.md").read_text())
     summary = {
         "replicates": len(replicates),
@@ -215,6 +231,7 @@ def main(argv=None) -> int:
         "ar1_replicates": int(sum(bool(r.get("ar1")) for r in replicates)),
         "coverage_90": {r["parameter"]: r["coverage_0.9"] for r in rows},
         "within_target": all(TARGET[0] <= r["coverage_0.9"] <= TARGET[1] for r in rows),
+        "pooled_rule": rule,
         "seconds": seconds,
     }
     print(json.dumps(summary))

@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-from peano_bayes.validation.sbc import RANK_DRAWS
+from peano_bayes.validation.sbc import POOLED_BAND, RANK_ALPHA, RANK_DRAWS
 
 HERE = Path(__file__).resolve().parent
 BAND = (0.85, 0.95)
@@ -71,11 +71,6 @@ def dependent_pass(correlation: np.ndarray, n: int, studies: int, rng: np.random
     return passed / studies
 
 
-#: The SBC-of-what-users-run rule (its pre-registration in docs/validation.md): the 90 % intervals' coverage pooled
-#: over every quantity and replicate within this band, and no quantity's rank histogram (10 bins) rejected by a
-#: chi-square test at Holm-corrected :data:`RANK_ALPHA`.
-POOLED_BAND = (0.87, 0.93)
-RANK_ALPHA = 0.01
 
 
 def pooled_rule_pass(correlation: np.ndarray, n: int, studies: int, rng: np.random.Generator) -> float:

@@ -193,3 +193,40 @@ def test_the_acceptance_rules_chance_for_a_calibrated_sampler():
     assert abs(independent - exact**3) < 4 * se
     as_one = power.dependent_pass(np.full((3, 3), 0.999999) + 1e-6 * np.eye(3), 100, studies, rng)
     assert abs(as_one - exact) < 4 * np.sqrt(exact * (1 - exact) / studies)
+
+
+def test_the_pooled_rule_on_known_studies():
+    from peano_bayes.validation.sbc import pooled_rule
+
+    rng = np.random.default_rng(3)
+    n = 100
+
+    def study(covered_share, ranks_of):
+        reps = []
+        for i in range(n):
+            covered = [bool(i < covered_share[j] * n) for j in range(2)]
+            reps.append(
+                {
+                    "covered": {str(level): covered for level in (0.5, 0.9, 0.94)},
+                    "rank": [ranks_of[j](i) for j in range(2)],
+                    "converged": i % 10 != 0,
+                }
+            )
+        return reps
+
+    uniform = lambda i: int(rng.integers(0, RANK_DRAWS + 1))  # noqa: E731
+    piled = lambda i: 0  # noqa: E731  every truth below every draw: the histogram's first bin holds all
+    calibrated = study([0.90, 0.90], [uniform, uniform])
+    rule = pooled_rule(coverage_table(calibrated, ["a", "b"]), calibrated)
+    assert rule["pooled_coverage"] == 0.90 and rule["unconverged"] == 10  # counted, not dropped
+    assert rule["passed"] and rule["rank_rejected"] == []
+    # pooled 0.86 (0.92 and 0.80): outside 87-93 % although one quantity alone is inside
+    low = study([0.92, 0.80], [uniform, uniform])
+    assert pooled_rule(coverage_table(low, ["a", "b"]), low)["pooled_coverage"] == 0.86
+    assert not pooled_rule(coverage_table(low, ["a", "b"]), low)["passed"]
+    # one quantity's ranks all in one bin: chi-square p ~ 0, Holm p = 2 p, rejected whatever the coverage
+    skewed = study([0.90, 0.90], [uniform, piled])
+    rule = pooled_rule(coverage_table(skewed, ["a", "b"]), skewed)
+    assert rule["rank_rejected"] == ["b"] and not rule["passed"]
+    raw = coverage_table(skewed, ["a", "b"])
+    assert rule["rank_p_holm"]["b"] == pytest.approx(min(1.0, 2 * raw[1]["rank_chi2_p"]), rel=1e-12)
