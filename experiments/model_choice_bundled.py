@@ -8,8 +8,8 @@ among the tests its signature shows in (``Effect.shows_in``). The sampled model 
 holds what discovery added) or, without RESULTS, is the configured model (the prior's ``[config]``), which
 ``run --no-discover`` samples and which discovery only adds to. With ``--discover OUT`` it runs the
 model choice of ``run`` itself on each bundled file (discovery from the configured model on the
-fitted tests, :func:`peano_bayes.discovery.choice.choose_model`, seed 0, its base fit started at the prior's
-medians as ``run`` does; reports in ``OUT/<code>/``; a report
+fitted tests, :func:`peano_bayes.discovery.choice.choose_model`, seed 0, its base fit started at the configured
+model's inference least squares as ``run`` does; reports in ``OUT/<code>/``; a report
 already there is read back instead of run again) and checks the model that choice would sample.
 
     python experiments/model_choice_bundled.py [RESULTS | --discover OUT]
@@ -26,13 +26,16 @@ import tomllib
 from importlib import resources
 from pathlib import Path
 
-from peano_bayes.app.pipeline import select_tests
+from peano_bayes.app.pipeline import prior_of, select_tests
 from peano_bayes.bundled import dataset_path
 from peano_bayes.data import load
-from peano_bayes.defaults import DEFAULT_TESTS
+from peano_bayes.defaults import DEFAULT_STARTS, DEFAULT_TESTS
 from peano_bayes.discovery.choice import choice_from_report, choose_model
 from peano_bayes.effects import LIBRARY, effects_in
+from peano_bayes.inference.driver import least_squares
+from peano_bayes.inference.posterior import DEFAULT_HELD, build_posterior
 from peano_bayes.inference.prior_files import load_prior
+from peano_bayes.inference.reduce import prepare
 from peano_bayes.physics.model import ModelConfig
 
 
@@ -52,7 +55,14 @@ def discovered(code: str, out: Path) -> tuple[list[str], set[str], dict]:
         choice = choice_from_report(config, json.loads((folder / "report.json").read_text()), folder)
     else:
         say = lambda m: print(f"{code}: {m}", flush=True)  # noqa: E731
-        choice = choose_model(dataset, config, folder, seed=0, log=say, centre=prior.median())
+        # as `run` does: the configured model's inference least squares on the fitted tests, discovery's base fit
+        # started at its optimum
+        whole = prior_of(dataset, None)
+        part = whole.for_config(config)
+        posterior = build_posterior(prepare(dataset), part, config=config, held=DEFAULT_HELD)
+        fitted = least_squares(posterior, part, n_starts=DEFAULT_STARTS, seed=0)
+        say(f"least squares {fitted.outcome()} in {fitted.seconds:.0f} s")
+        choice = choose_model(dataset, config, folder, seed=0, log=say, start=fitted.params)
     record = {"verdict": choice.verdict, "named": list(choice.named), "adopted": list(choice.adopted)}
     return list(dataset.tests), set(effects_in(choice.config)), record
 
