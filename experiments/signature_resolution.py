@@ -30,7 +30,7 @@ from discrepancy_benchmark import cases
 
 from peano_bayes import enable_compilation_cache
 from peano_bayes.discovery import discovery_data
-from peano_bayes.discovery.diagnose import _holm, diagnose
+from peano_bayes.discovery.diagnose import diagnose, holm
 from peano_bayes.discovery.fitting import evaluate
 from peano_bayes.discovery.model import DEFAULT_BASE
 from peano_bayes.discovery.workflow import Gates, fit_base, matched_weights
@@ -69,7 +69,7 @@ def summary(rows: list[dict]) -> dict:
         for k, sig in r["by_block"].items():
             families = [(k, {s: v["p_holm"] for s, v in sig.items()})]
             if all("p" in v for v in sig.values()):
-                families.append((f"{k}/physics", _holm({s: v["p"] for s, v in sig.items()})))
+                families.append((f"{k}/physics", holm({s: v["p"] for s, v in sig.items()})))
             for label, p_holm in families:
                 cell = out.setdefault(r["case"], {}).setdefault(label, {"sessions": 0, "own": 0, "any": 0})
                 cell["sessions"] += 1

@@ -203,7 +203,9 @@ def signature_statistic(r: np.ndarray, w: np.ndarray, squared: bool = False, one
     return (max(projection, 0.0) if one_sided else abs(projection)) / float(norm)
 
 
-def _holm(p: dict) -> dict:
+def holm(p: dict) -> dict:
+    """Holm's step-down adjustment of the p-values ``p`` (name -> p): the i-th smallest times (m - i), made
+    non-decreasing, capped at 1 (name -> adjusted p)."""
     names = sorted(p, key=p.get)
     out, running = {}, 0.0
     for i, name in enumerate(names):
@@ -266,7 +268,7 @@ def diagnose(
     counts = np.bincount(blocks, minlength=n_blocks)
     z = np.bincount(blocks, weights=r, minlength=n_blocks) / np.sqrt(np.maximum(counts, 1))
     omnibus = float(stats.chi2.sf(np.sum(z**2), n_blocks))
-    return Diagnosis(statistic, p_value, _holm(p_value), omnibus, alpha, weights, frozenset(matched or ()))
+    return Diagnosis(statistic, p_value, holm(p_value), omnibus, alpha, weights, frozenset(matched or ()))
 
 
 __all__ = [
@@ -275,6 +277,7 @@ __all__ = [
     "SIGNATURE_BLOCK_BINS",
     "decay_after_reversal",
     "N_FLIPS",
+    "holm",
     "SIGNATURES",
     "diagnose",
     "sign_flip_p",

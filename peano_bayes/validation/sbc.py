@@ -32,6 +32,7 @@ import numpy as np
 from scipy import stats
 
 from ..defaults import DEFAULT_CHUNK, DEFAULT_STARTS, DEFAULT_WARMUP
+from ..discovery.diagnose import holm
 from ..errors import PeanoBayesInputError
 from ..inference.driver import least_squares, posterior_at_mode, walker_start
 from ..inference.posterior import SPECIMEN_SD, Posterior, build_posterior, helmert
@@ -375,19 +376,15 @@ def pooled_rule(rows: list[dict], replicates: list[dict], level: float = 0.9) ->
     ``passed``."""
     covered = np.array([r["covered"][str(level)] for r in replicates], dtype=bool)  # (replicates, quantities)
     k, n = int(covered.sum()), covered.size
-    p = np.array([row["rank_chi2_p"] for row in rows])
-    order = np.argsort(p)
-    adjusted = np.empty_like(p)
-    adjusted[order] = np.minimum(1.0, np.maximum.accumulate((len(p) - np.arange(len(p))) * p[order]))
-    holm = {row["parameter"]: float(a) for row, a in zip(rows, adjusted, strict=True)}
+    adjusted = holm({row["parameter"]: row["rank_chi2_p"] for row in rows})
     pooled = k / n
-    rejected = sorted(name for name, a in holm.items() if a <= RANK_ALPHA)
+    rejected = sorted(name for name, a in adjusted.items() if a <= RANK_ALPHA)
     return {
         "level": level,
         "pooled_coverage": pooled,
         "pooled_wilson95": list(wilson_interval(k, n)),
         "band": list(POOLED_BAND),
-        "rank_p_holm": holm,
+        "rank_p_holm": adjusted,
         "rank_rejected": rejected,
         "unconverged": int(sum(not r["converged"] for r in replicates)),
         "passed": bool(POOLED_BAND[0] <= pooled <= POOLED_BAND[1] and not rejected),
