@@ -18,14 +18,16 @@ for TP).
   algorithm on the same density gives the same ESS per step, so the ESS/s ratio is at least the ratio of time
   per step: a lower bound on our advantage.
 - **(b) NUTS**: numpyro, dense mass matrix started at the Laplace inverse Hessian of the point ours started at
-  (adapted further in warm-up), ``--nuts-warmup`` + ``--nuts-samples`` draws from that point; its bulk ESS from
+  (adapted further in warm-up), ``--nuts-chains`` chains (default 2, run one after another) of ``--nuts-warmup`` +
+  ``--nuts-samples`` draws each, each chain started at its own draw from that approximation; its bulk ESS from
   arviz (minimum over parameters). A first short run compiles its step functions (timed apart, the persistent
   compilation cache then serves the measured run). A faster sampler of another distribution would prove
   nothing, so NUTS's draws are compared with ours (read back from ours' ``posterior.nc``): means and 94 %
   interval ends per parameter, in units of ours' sd and of the two runs' combined Monte Carlo error, which sets
   how small a difference the run can resolve (``reference_run.agreement``; ``nuts_against_ours`` in the JSON).
 
-    python experiments/bench_inference.py [--material TP] [--nuts-warmup 500] [--nuts-samples 1000] [--out DIR]
+    python experiments/bench_inference.py [--material TP] [--nuts-chains 2] [--nuts-warmup 500]
+        [--nuts-samples 1000] [--out DIR]
 
 The last line printed is one JSON object.
 """
@@ -115,33 +117,51 @@ def laplace_inverse_mass(potential, centre: np.ndarray) -> np.ndarray:
     return capped_covariance(hessian, 9.0 * np.eye(centre.size), max_sd=3.0)
 
 
-def run_nuts(posterior, centre, warmup: int, samples: int) -> dict:
+def run_nuts(posterior, centre, warmup: int, samples: int, chains: int) -> dict:
+    """``chains`` NUTS chains run one after another on this process (``chain_method="sequential"``, so their
+    seconds add up as one core's), each started at its own draw from the Laplace approximation around ``centre``
+    so that split R-hat across chains can see a chain stuck where it started. Returns the seconds of all chains,
+    bulk ESS and R-hat over all chains, and the draws (chains, samples, D)."""
     from numpyro.infer import MCMC, NUTS
 
     potential = jax.jit(lambda theta: -posterior.log_prob(theta))
     t0 = time.perf_counter()
-    inverse_mass = jnp.asarray(laplace_inverse_mass(potential, centre))
+    inverse_mass = laplace_inverse_mass(potential, centre)
     mass_s = time.perf_counter() - t0
+    starts = np.random.default_rng(SEED).multivariate_normal(np.asarray(centre, dtype=float), inverse_mass, chains)
 
-    def mcmc_run(n_warmup, n_samples, key):
-        kernel = NUTS(potential_fn=potential, dense_mass=True, inverse_mass_matrix=inverse_mass)
+    def mcmc_run(n_warmup, n_samples, key, n_chains):
+        kernel = NUTS(potential_fn=potential, dense_mass=True, inverse_mass_matrix=jnp.asarray(inverse_mass))
         # progress_bar=True: numpyro steps a jitted transition from Python, so the step functions compile once
         # whatever the run's length (the short run below compiles them, the persistent cache serves the long one)
-        mcmc = MCMC(kernel, num_warmup=n_warmup, num_samples=n_samples, num_chains=1, progress_bar=True)
+        mcmc = MCMC(
+            kernel,
+            num_warmup=n_warmup,
+            num_samples=n_samples,
+            num_chains=n_chains,
+            chain_method="sequential",
+            progress_bar=True,
+        )
         t0 = time.perf_counter()
-        mcmc.run(jax.random.PRNGKey(key), init_params=jnp.asarray(centre), extra_fields=("num_steps",))
+        init = starts[0] if n_chains == 1 else starts[:n_chains]  # numpyro: (D,) for one chain, (chains, D) else
+        mcmc.run(jax.random.PRNGKey(key), init_params=jnp.asarray(init), extra_fields=("num_steps",))
         return mcmc, time.perf_counter() - t0
 
-    _, compile_s = mcmc_run(2, 2, SEED)
-    mcmc, seconds = mcmc_run(warmup, samples, SEED + 1)
-    draws = np.asarray(mcmc.get_samples())[None]
+    _, compile_s = mcmc_run(2, 2, SEED, 1)
+    mcmc, seconds = mcmc_run(warmup, samples, SEED + 1, chains)
+    draws = np.asarray(mcmc.get_samples(group_by_chain=True))
+    data = az.convert_to_dataset({f"p{i}": draws[..., i] for i in range(draws.shape[-1])})
+    rhat = az.rhat(data)
     return {
+        "chains": chains,
+        "chain_method": "sequential",
         "seconds": seconds,
         "short_run_with_compile_s": compile_s,
         "initial_mass_s": mass_s,
         "min_ess": min_ess(draws),
+        "max_rhat": float(max(float(rhat[k]) for k in data.data_vars)),
         "mean_leapfrog_steps": float(np.mean(np.asarray(mcmc.get_extra_fields()["num_steps"]))),
-        "draws": draws[0],
+        "draws": draws,
     }
 
 
@@ -164,9 +184,9 @@ def posterior_agreement(posterior, ours: np.ndarray, nuts: np.ndarray, n_ensembl
     """NUTS's posterior against ours by the rule and measure of ``reference_run.agreement``: per entry of theta,
     the mean's and the 94 % interval ends' differences in ours' sd and in the two runs' combined Monte Carlo
     error, the worst of each, and whether they are within 0.1 / 0.2 sd. ``ours`` is (walkers, draws, D), its
-    walkers each a chain as the convergence rule's ESS counts them; ``nuts`` one chain (draws, D)."""
+    walkers each a chain as the convergence rule's ESS counts them; ``nuts`` (chains, draws, D)."""
     return agreement(
-        {name: nuts[None, :, i] for i, name in enumerate(posterior.names)},
+        {name: nuts[..., i] for i, name in enumerate(posterior.names)},
         {name: ours[..., i] for i, name in enumerate(posterior.names)},
     )
 
@@ -175,7 +195,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--material", default="TP")
     parser.add_argument("--nuts-warmup", type=int, default=500)
-    parser.add_argument("--nuts-samples", type=int, default=1000)
+    parser.add_argument("--nuts-samples", type=int, default=1000, help="NUTS draws kept per chain")
+    parser.add_argument("--nuts-chains", type=int, default=2, help="NUTS chains, run one after another")
     parser.add_argument("--out", type=Path, default=None, help="where ours writes its fit (default: a temp dir)")
     parser.add_argument("--reuse-fit", action="store_true", help="read ours from --out instead of fitting again")
     parser.add_argument("--max-steps", type=int, default=DEFAULT_MAX_STEPS, help="ours' step limit (a smoke run)")
@@ -213,10 +234,10 @@ def main() -> None:
     numpy_per_step = per_walker * walkers
     numpy_rate = (ours_ess / steps) / numpy_per_step
     # (b) NUTS on the same JAX density, from the point ours started its walkers around.
-    nuts = run_nuts(posterior, point, args.nuts_warmup, args.nuts_samples)
+    nuts = run_nuts(posterior, point, args.nuts_warmup, args.nuts_samples, args.nuts_chains)
     nuts_rate = nuts["min_ess"] / nuts["seconds"]
     nuts_draws = nuts.pop("draws")
-    np.save(out / f"nuts_draws_{args.material}.npy", nuts_draws)  # (samples, D) theta, to compare again later
+    np.save(out / f"nuts_draws_{args.material}.npy", nuts_draws)  # (chains, samples, D) theta, to compare again later
     same = posterior_agreement(
         posterior, ours_theta(posterior, out / summary["label"]), nuts_draws, summary["n_ensembles"]
     )
@@ -238,7 +259,8 @@ def main() -> None:
     )
     print(
         f"{'(b) NUTS dense (numpyro)':<34} {nuts['seconds']:10.1f} {nuts['min_ess']:13.0f} {nuts_rate:10.2f}"
-        f"   ({nuts['mean_leapfrog_steps']:.1f} leapfrog/draw)"
+        f"   ({nuts['chains']} chains one after another, {nuts['mean_leapfrog_steps']:.1f} leapfrog/draw, "
+        f"max R-hat {nuts['max_rhat']:.3f})"
     )
     print(
         f"NUTS against ours: means within {same['max_mean_difference_sd']:.3f} sd ({same['worst_mean']}), "
@@ -254,6 +276,9 @@ def main() -> None:
         json.dumps(
             {
                 "benchmark": "inference",
+                "date": time.strftime("%Y-%m-%d"),
+                "reused_fit": bool(args.reuse_fit and previous.exists()),
+                "nuts_chains": nuts["chains"],
                 "material": args.material,
                 "ndim": posterior.ndim,
                 "n_bins": posterior.observations.n_bins,
