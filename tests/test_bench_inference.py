@@ -16,7 +16,7 @@ import bench_inference  # noqa: E402
 
 POSTERIOR = SimpleNamespace(names=["a", "b", "c"])
 LOC, SCALE = np.array([0.0, 0.0, 5.0]), np.array([1.0, 1.0, 3.0])
-N_OURS, N_NUTS, ENSEMBLES = (8, 25_000), 40_000, 4  # ours: (walkers, draws), pooled into 4 chains
+N_OURS, N_NUTS, ENSEMBLES = (8, 25_000), (2, 20_000), 4  # ours: (walkers, draws); NUTS: (chains, draws)
 Z97 = stats.norm.ppf(0.97)
 
 
@@ -32,7 +32,7 @@ def _iid_quantile_se_sd(prob, n, stretch=1.0):
 
 def test_draws_of_one_distribution_are_the_same_posterior():
     rng = np.random.default_rng(0)
-    nuts = LOC + SCALE * rng.normal(size=(N_NUTS, 3))
+    nuts = LOC + SCALE * rng.normal(size=(*N_NUTS, 3))
     same = bench_inference.posterior_agreement(POSTERIOR, _ours(rng), nuts, ENSEMBLES)
     assert same["same_posterior"] and same["quantities"] == 3
     assert same["max_mean_difference_sd"] < 0.03 and same["max_interval_end_difference_sd"] < 0.06
@@ -40,9 +40,9 @@ def test_draws_of_one_distribution_are_the_same_posterior():
 
 def test_a_shifted_mean_and_a_stretched_upper_tail_are_found_on_their_own_parameters_with_their_errors():
     rng = np.random.default_rng(1)
-    z = rng.normal(size=(N_NUTS, 3))
+    z = rng.normal(size=(*N_NUTS, 3))
     stretch = 2.5  # c's half above its median 2.5x wider, moved down to keep c's mean
-    z[:, 2] = np.where(z[:, 2] > 0, stretch * z[:, 2], z[:, 2]) - (stretch - 1) * stats.norm.pdf(0)
+    z[..., 2] = np.where(z[..., 2] > 0, stretch * z[..., 2], z[..., 2]) - (stretch - 1) * stats.norm.pdf(0)
     nuts = LOC + SCALE * z + np.array([0.0, 0.15, 0.0])  # b's mean 0.15 sd up
     same = bench_inference.posterior_agreement(POSTERIOR, _ours(rng), nuts, ENSEMBLES)
     assert not same["same_posterior"]
@@ -54,5 +54,5 @@ def test_a_shifted_mean_and_a_stretched_upper_tail_are_found_on_their_own_parame
     # in combined standard errors: that difference over both samplers' errors of the 97 % quantile, each near an
     # independent sample's (the 3 % end's error would give 2.3 times the figure; arviz's estimate of an error
     # scatters by about +-20 % at these sizes)
-    combined = np.hypot(_iid_quantile_se_sd(0.97, N_NUTS, stretch), _iid_quantile_se_sd(0.97, np.prod(N_OURS)))
+    combined = np.hypot(_iid_quantile_se_sd(0.97, np.prod(N_NUTS), stretch), _iid_quantile_se_sd(0.97, np.prod(N_OURS)))
     assert 0.67 < c["interval_end_mcse"] / (c["interval_end_sd"] / combined) < 1.5
