@@ -34,8 +34,9 @@ DEFAULT_WARMUP = None
 #: Longest adaptive warm-up [steps]; a run that reaches it samples with the last proposal and says so.
 DEFAULT_MAX_WARMUP = 3600
 #: How a fit samples the specimen contrasts (``--contrasts``): ``auto`` samples those the data pin little as
-#: multiples of the between-specimen spread (:func:`peano_bayes.inference.coordinates.choose_noncentred`).
-CONTRAST_CHOICES = ("auto", "centred")
+#: multiples of the between-specimen spread (:func:`peano_bayes.inference.coordinates.choose_noncentred`),
+#: ``centred`` none, ``noncentred`` all of them (:func:`peano_bayes.inference.coordinates.contrast_flags`).
+CONTRAST_CHOICES = ("auto", "centred", "noncentred")
 #: What the sampler moves (:func:`peano_bayes.inference.coordinates.sampler_coordinates`): the series tensile
 #: element as its log stretches at 1 and 20 N. From the same seed, 1200 steps and the former 300-step warm-up,
 #: against theta itself (``experiments/coordinates_arms.py``): PR tau_max 40.4 -> 22.7 steps, min bulk ESS

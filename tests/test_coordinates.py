@@ -153,3 +153,18 @@ def test_a_contrast_is_non_centred_where_the_data_pin_it_little_against_the_spre
     cov = np.diag([0.1, 0.1, 0.1, (0.9 * NONCENTRE_RATIO * 0.1) ** 2, (1.1 * NONCENTRE_RATIO * 0.1) ** 2])
     assert choose_noncentred(post, mode, cov) == (False, True)
     assert choose_noncentred(SimpleNamespace(n_contrasts=0), mode, cov) == ()
+
+
+def test_the_contrasts_choice_names_which_contrasts_are_non_centred():
+    from peano_bayes.inference.coordinates import NONCENTRE_RATIO, contrast_flags
+
+    post = _with_contrasts(2)
+    mode = np.zeros(5)
+    mode[2] = post.prior.marginals["specimen_log_sd"].to_unconstrained(0.1)
+    cov = np.diag([0.1, 0.1, 0.1, (0.9 * NONCENTRE_RATIO * 0.1) ** 2, (1.1 * NONCENTRE_RATIO * 0.1) ** 2])
+    assert contrast_flags("auto", post, mode, cov) == (False, True)
+    assert contrast_flags("centred", post, mode, cov) == ()
+    assert contrast_flags("noncentred", post, mode, cov) == (True, True)
+    assert contrast_flags("noncentred", SimpleNamespace(n_contrasts=0), mode, cov) == ()
+    with pytest.raises(ValueError, match="unknown contrasts choice 'sideways'"):
+        contrast_flags("sideways", post, mode, cov)

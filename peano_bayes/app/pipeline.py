@@ -33,7 +33,7 @@ from ..defaults import (
     HDI_PROB,
 )
 from ..errors import PeanoBayesInputError
-from ..inference.coordinates import choose_noncentred, sampler_coordinates
+from ..inference.coordinates import contrast_flags, sampler_coordinates
 from ..inference.driver import (
     _first_call_seconds,
     _log_lags,
@@ -231,7 +231,7 @@ def infer(
     choice either way. ``coordinates``: what the sampler moves, ``"theta"`` or ``"tensile_stretch"``
     (:func:`~peano_bayes.inference.coordinates.sampler_coordinates`). ``contrasts``: ``"auto"`` samples each
     specimen contrast the data pin little non-centred (:func:`~peano_bayes.inference.coordinates.
-    choose_noncentred`), ``"centred"`` none.
+    choose_noncentred`), ``"centred"`` none, ``"noncentred"`` all.
     """
     if contrasts not in CONTRAST_CHOICES:
         raise PeanoBayesInputError(f"contrasts={contrasts!r}: expected one of {', '.join(CONTRAST_CHOICES)}")
@@ -305,7 +305,7 @@ def infer(
     else:
         start = posterior_at_mode(posterior, centre, covariance, log=lambda m: log(f"{code}: {m}"))
         posterior, centre, covariance = start.posterior, start.laplace.mode, start.laplace.covariance
-        noncentred = choose_noncentred(posterior, centre, covariance) if contrasts == "auto" else ()
+        noncentred = contrast_flags(contrasts, posterior, centre, covariance)
         record = {
             "names": list(posterior.names),
             "theta": start.exact.mode.tolist(),

@@ -184,6 +184,23 @@ def choose_noncentred(posterior, mode: np.ndarray, covariance: np.ndarray) -> tu
     return tuple(bool(s >= NONCENTRE_RATIO * tau) for s in sd)
 
 
+def contrast_flags(choice: str, posterior, mode: np.ndarray, covariance: np.ndarray) -> tuple[bool, ...]:
+    """Per contrast of ``posterior``, whether to sample it non-centred under the ``--contrasts`` ``choice``:
+    ``"auto"`` by :func:`choose_noncentred` at the Laplace approximation (``mode`` (D,), ``covariance`` (D, D),
+    theta), ``"centred"`` none, ``"noncentred"`` all. ``auto`` looks at the spread at its mode only: with two
+    specimens the spread's posterior can reach far below its mode, into the neck of the funnel that centred
+    contrasts make, and there ``noncentred`` mixes where ``auto`` does not (docs/validation.md, recovery with
+    drawn constants)."""
+    n = getattr(posterior, "n_contrasts", 0)
+    if choice == "auto":
+        return choose_noncentred(posterior, mode, covariance)
+    if choice == "centred":
+        return ()
+    if choice == "noncentred":
+        return (True,) * n if n else ()
+    raise ValueError(f"unknown contrasts choice {choice!r}; expected 'auto', 'centred' or 'noncentred'")
+
+
 def sampler_coordinates(posterior, kind: str = "theta", noncentred: tuple[bool, ...] = ()):
     """The coordinates ``kind`` (``"theta"`` or ``"tensile_stretch"``) for ``posterior``: tensile stretches only
     where both ``tensile_ka`` and ``tensile_kb`` are sampled (with ``ka`` alone the log stretch is affine in
@@ -215,5 +232,6 @@ __all__ = [
     "NonCentredContrasts",
     "TensileStretch",
     "choose_noncentred",
+    "contrast_flags",
     "sampler_coordinates",
 ]

@@ -82,7 +82,8 @@ def _sampling_arguments(p, *, discover_by_default: bool = False):
         choices=CONTRAST_CHOICES,
         default=CONTRAST_CHOICES[0],
         help="specimen contrasts: 'auto' samples those the data pin little as multiples of the spread "
-        "(non-centred), 'centred' samples all as they are (default: auto; see docs/inference.md)",
+        "(non-centred), 'centred' samples all as they are, 'noncentred' all as multiples of the spread "
+        "(default: auto; see docs/inference.md)",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.add_argument(
