@@ -159,7 +159,7 @@ def run_nuts(posterior, centre, warmup: int, samples: int, chains: int) -> dict:
         "short_run_with_compile_s": compile_s,
         "initial_mass_s": mass_s,
         "min_ess": min_ess(draws),
-        "max_rhat": float(max(float(rhat[k]) for k in data.data_vars)),
+        "max_rhat": float(max(float(rhat[k]) for k in data.data_vars)) if chains > 1 else None,  # one: none
         "mean_leapfrog_steps": float(np.mean(np.asarray(mcmc.get_extra_fields()["num_steps"]))),
         "draws": draws,
     }
@@ -206,7 +206,8 @@ def main() -> None:
 
     # Ours: the fit as the command line runs it.
     previous = out / args.material / "summary.json"
-    if args.reuse_fit and previous.exists():
+    reused = bool(args.reuse_fit and previous.exists())  # before infer writes a summary of its own there
+    if reused:
         summary = json.loads(previous.read_text())
     else:
         summary = infer(
@@ -260,7 +261,7 @@ def main() -> None:
     print(
         f"{'(b) NUTS dense (numpyro)':<34} {nuts['seconds']:10.1f} {nuts['min_ess']:13.0f} {nuts_rate:10.2f}"
         f"   ({nuts['chains']} chains one after another, {nuts['mean_leapfrog_steps']:.1f} leapfrog/draw, "
-        f"max R-hat {nuts['max_rhat']:.3f})"
+        f"max R-hat {nuts['max_rhat'] if nuts['max_rhat'] is None else round(nuts['max_rhat'], 3)})"
     )
     print(
         f"NUTS against ours: means within {same['max_mean_difference_sd']:.3f} sd ({same['worst_mean']}), "
@@ -277,8 +278,10 @@ def main() -> None:
             {
                 "benchmark": "inference",
                 "date": time.strftime("%Y-%m-%d"),
-                "reused_fit": bool(args.reuse_fit and previous.exists()),
+                "reused_fit": reused,
                 "nuts_chains": nuts["chains"],
+                "nuts_warmup": args.nuts_warmup,
+                "nuts_samples_per_chain": args.nuts_samples,
                 "material": args.material,
                 "ndim": posterior.ndim,
                 "n_bins": posterior.observations.n_bins,
