@@ -189,8 +189,8 @@ def contrast_flags(choice: str, posterior, mode: np.ndarray, covariance: np.ndar
     ``"auto"`` by :func:`choose_noncentred` at the Laplace approximation (``mode`` (D,), ``covariance`` (D, D),
     theta), ``"centred"`` none, ``"noncentred"`` all. ``auto`` looks at the spread at its mode only: with two
     specimens the spread's posterior can reach far below its mode, into the neck of the funnel that centred
-    contrasts make, and there ``noncentred`` mixes where ``auto`` does not (docs/validation.md, recovery with
-    drawn constants)."""
+    contrasts make; ``noncentred`` is the other coordinate system for such a fit, not a cure where the data pin
+    the contrasts about as tightly as the spread ranges (docs/validation.md, recovery with drawn constants)."""
     n = getattr(posterior, "n_contrasts", 0)
     if choice == "auto":
         return choose_noncentred(posterior, mode, covariance)
