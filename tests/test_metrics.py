@@ -6,6 +6,7 @@ import json
 import arviz as az
 import numpy as np
 import pytest
+from scipy import stats
 
 from peano_bayes.analysis.metrics import (
     STEP_METRICS,
@@ -41,6 +42,36 @@ def test_parameter_draws_take_sampled_fixed_and_prior_values(result_dir, recover
     assert min(values) >= draws["tensile_ka_n_per_m"].min() and max(values) <= draws["tensile_ka_n_per_m"].max()
     assert all(s["extension_k_n_per_m"] == truth["extension_k_n_per_m"] for s in sets)  # held at the fit's value
     assert len({s["orifice_area_m2"] for s in sets}) == 5  # prior draws, not one value
+
+
+def test_a_new_specimen_beyond_a_physical_bound_is_redrawn_inside_it(result_dir):
+    """A population near a bound (friction stiffness 9.5e5 N/m, bound 1e6) with spread 0.2: stored new-specimen
+    draws above the bound (as ``metrics`` met on Veale-model data, where the rig then refused the parameter)
+    are redrawn from the hierarchy truncated to the bound, the rest kept. Known answer: the redrawn
+    ``z = ln(x / mu) / tau`` are standard normal below ln(1e6 / 9.5e5) / 0.2 = 0.256, whose mean is
+    -phi(0.256) / Phi(0.256) = -0.642."""
+    idata = load_result(result_dir)
+    post = idata.posterior
+    shape = (post.sizes["chain"], post.sizes["draw"])
+    name, mu, tau, high = "friction_stiffness_n_per_m", 9.5e5, 0.2, 1e6
+    stored = np.where(np.arange(np.prod(shape)).reshape(shape) % 2 == 0, 2.0e6, 9.0e5)  # every other draw beyond
+    idata.posterior = post.assign(
+        {
+            name: (("chain", "draw"), np.full(shape, mu)),
+            "specimen_log_sd": (("chain", "draw"), np.full(shape, tau)),
+            "new_specimen__" + name: (("chain", "draw"), stored),
+        }
+    )
+    n = int(np.prod(shape))
+    sets, _ = parameter_draws(idata, n, seed=3)
+    values = np.array([s[name] for s in sets])
+    assert np.all(values <= high) and np.sum(values == 9.0e5) == n // 2  # in-bound draws kept as stored
+    z = np.log(values[values != 9.0e5] / mu) / tau
+    bound = np.log(high / mu) / tau
+    expected = -stats.norm.pdf(bound) / stats.norm.cdf(bound)
+    assert z.max() <= bound and abs(z.mean() - expected) < 4 * z.std() / np.sqrt(z.size), (z.mean(), expected)
+    again, _ = parameter_draws(idata, n, seed=3)
+    assert [s[name] for s in again] == list(values)  # seeded
 
 
 def test_unfitted_parameters_come_from_the_prior_the_fit_used(result_dir, tmp_path):

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import warnings
 from importlib import metadata
 from pathlib import Path
@@ -23,12 +24,13 @@ import arviz as az
 import jax
 import jax.numpy as jnp
 import numpy as np
+from scipy import stats
 
 from ..atomic import replacing
 from ..errors import PeanoBayesInputError
-from ..physics import ModelConfig
+from ..physics import PARAMETERS, ModelConfig
 from .likelihood import group_log_likelihood
-from .posterior import STEP_ONLY_PARAMETERS, Posterior, fixed_batches
+from .posterior import SPECIMEN_SD, STEP_ONLY_PARAMETERS, Posterior, fixed_batches
 from .prior_files import load_prior
 from .sample import SampleResult
 
@@ -276,7 +278,8 @@ def parameter_draws(
     drawn from the prior instead (see :class:`~peano_bayes.analysis.metrics.PosteriorMetrics`).
 
     ``level``: ``"new_specimen"`` (default), a specimen not yet made, so the sets carry the between-specimen
-    spread (what a designer building one more muscle gets); ``"population"``, the material's population value.
+    spread (what a designer building one more muscle gets), each inside its parameter's physical bounds
+    (:func:`_inside_bounds`); ``"population"``, the material's population value.
     Results without a specimen hierarchy (one specimen) have one level.
 
     Every name the result's configuration reads: posterior draw if sampled; else the ``fixed_parameters``
@@ -303,11 +306,12 @@ def parameter_draws(
         prior = load_prior(attrs.get("prior", material)).for_config(config).select(prior_only)
         prior_values = prior.sample_params(np.random.default_rng([seed, 7]), n_draws)
     sets = []
+    rng = np.random.default_rng([seed, 11])
     for i, j in enumerate(pick):
         params = {}
         for n in names:
             if level == "new_specimen" and NEW_SPECIMEN_PREFIX + n in post:
-                params[n] = float(post[NEW_SPECIMEN_PREFIX + n].values[j])
+                params[n] = _inside_bounds(n, float(post[NEW_SPECIMEN_PREFIX + n].values[j]), post, j, rng)
             elif n in post:
                 params[n] = float(post[n].values[j])
             elif n in prior_values:
@@ -316,6 +320,26 @@ def parameter_draws(
                 params[n] = float(fixed[n])
         sets.append(params)
     return sets, prior_only
+
+
+def _inside_bounds(name: str, value: float, post, j: int, rng: np.random.Generator) -> float:
+    """A new specimen's ``value`` of ``name`` [SI], redrawn inside the parameter's physical bounds where the
+    stored draw left them. The population value ``mu`` (posterior draw ``j``) lies inside its prior's support,
+    within the bounds, but ``mu exp(tau z)`` need not: a fit whose population sits near a bound (friction
+    stiffness near 1e6 N/m on a muscle that never slips) then gives specimens the rig cannot simulate. Such a
+    draw takes ``z`` from the standard normal truncated to the bounds, the hierarchy's own distribution
+    restricted to the parameter's support, as the priors are."""
+    low, high = PARAMETERS[name].bounds
+    if low <= value <= high:
+        return value
+    mu = float(post[name].values[j])
+    tau = float(post[SPECIMEN_SD].values[j]) if SPECIMEN_SD in post else 0.0
+    if tau <= 0.0:
+        return min(max(mu, low), high)
+    z_low = math.log(low / mu) / tau if low > 0 else -math.inf
+    z_high = math.log(high / mu) / tau if math.isfinite(high) else math.inf
+    z = float(stats.truncnorm.rvs(z_low, z_high, random_state=rng))
+    return min(max(mu * math.exp(tau * z), low), high)  # the clamp only guards the last rounding
 
 
 def load_result(path: str | Path):
