@@ -305,15 +305,17 @@ def parameter_draws(
         # The prior the fit used (a file of one's own, or the material's bundled prior for older results).
         prior = load_prior(attrs.get("prior", material)).for_config(config).select(prior_only)
         prior_values = prior.sample_params(np.random.default_rng([seed, 7]), n_draws)
+    wanted = [*names, *(NEW_SPECIMEN_PREFIX + n for n in names), SPECIMEN_SD]
+    drawn = {k: np.asarray(post[k].values)[pick] for k in wanted if k in post}  # (n_draws,) each, read once
     sets = []
     rng = np.random.default_rng([seed, 11])
-    for i, j in enumerate(pick):
+    for i in range(n_draws):
         params = {}
         for n in names:
-            if level == "new_specimen" and NEW_SPECIMEN_PREFIX + n in post:
-                params[n] = _inside_bounds(n, float(post[NEW_SPECIMEN_PREFIX + n].values[j]), post, j, rng)
-            elif n in post:
-                params[n] = float(post[n].values[j])
+            if level == "new_specimen" and NEW_SPECIMEN_PREFIX + n in drawn:
+                params[n] = _inside_bounds(n, float(drawn[NEW_SPECIMEN_PREFIX + n][i]), drawn, i, rng)
+            elif n in drawn:
+                params[n] = float(drawn[n][i])
             elif n in prior_values:
                 params[n] = float(np.asarray(prior_values[n])[i])
             else:
@@ -322,9 +324,10 @@ def parameter_draws(
     return sets, prior_only
 
 
-def _inside_bounds(name: str, value: float, post, j: int, rng: np.random.Generator) -> float:
+def _inside_bounds(name: str, value: float, drawn: dict, i: int, rng: np.random.Generator) -> float:
     """A new specimen's ``value`` of ``name`` [SI], redrawn inside the parameter's physical bounds where the
-    stored draw left them. The population value ``mu`` (posterior draw ``j``) lies inside its prior's support,
+    stored draw left them. The population value ``mu`` (``drawn[name][i]``, ``drawn``: name -> (n_draws,) values
+    of the picked posterior draws) lies inside its prior's support,
     within the bounds, but ``mu exp(tau z)`` need not: a fit whose population sits near a bound (friction
     stiffness near 1e6 N/m on a muscle that never slips) then gives specimens the rig cannot simulate. Such a
     draw takes ``z`` from the standard normal truncated to the bounds, the hierarchy's own distribution
@@ -332,8 +335,8 @@ def _inside_bounds(name: str, value: float, post, j: int, rng: np.random.Generat
     low, high = PARAMETERS[name].bounds
     if low <= value <= high:
         return value
-    mu = float(post[name].values[j])
-    tau = float(post[SPECIMEN_SD].values[j]) if SPECIMEN_SD in post else 0.0
+    mu = float(drawn[name][i])
+    tau = float(drawn[SPECIMEN_SD][i]) if SPECIMEN_SD in drawn else 0.0
     if tau <= 0.0:
         return min(max(mu, low), high)
     z_low = math.log(low / mu) / tau if low > 0 else -math.inf
