@@ -191,13 +191,12 @@ def contrast_flags(choice: str, posterior, mode: np.ndarray, covariance: np.ndar
     specimens the spread's posterior can reach far below its mode, into the neck of the funnel that centred
     contrasts make; ``noncentred`` is the other coordinate system for such a fit, not a cure where the data pin
     the contrasts about as tightly as the spread ranges (docs/validation.md, recovery with drawn constants)."""
-    n = getattr(posterior, "n_contrasts", 0)
     if choice == "auto":
         return choose_noncentred(posterior, mode, covariance)
     if choice == "centred":
         return ()
     if choice == "noncentred":
-        return (True,) * n if n else ()
+        return (True,) * getattr(posterior, "n_contrasts", 0)
     raise ValueError(f"unknown contrasts choice {choice!r}; expected 'auto', 'centred' or 'noncentred'")
 
 
