@@ -16,6 +16,10 @@ reference:
 - **notes users do not have**: the design and physics notes the project was built from, which are not part of
   the repository, cited by name (:data:`ABSENT_NOTES`).
 
+A captured program output (``*.log``) is a record of one run, kept verbatim: the output folders it names (a fit's
+result folder, gitignored for its size) are what that run wrote, not files the repository promises, so its
+repository paths are not checked (absent notes still are).
+
 The failure lists every ``file:line: reference``.
 """
 
@@ -57,6 +61,9 @@ MARKDOWN = {".md", ".ipynb"}
 
 #: Files of patterns, not references (``.gitignore``'s ``experiments/*/claims/`` names what may appear).
 PATTERN_FILES = {".gitignore", ".gitattributes", ".dockerignore"}
+
+#: Captured program output: a verbatim record of a run, whose repository paths are the run's own outputs.
+CAPTURED_OUTPUT = {".log"}
 
 SKIPPED_DIRS = {".git", ".venv", "__pycache__", ".pytest_cache", ".ruff_cache", ".hypothesis", "node_modules"}
 
@@ -130,7 +137,7 @@ def dangling_references(path: Path, text: str) -> list[str]:
     for number, line in enumerate(text.splitlines(), 1):
         for match in ABSENT_NOTES.finditer(line):
             bad.append(f"{rel}:{number}: {match.group(0)} (not part of the repository)")
-        for match in PATH.finditer(line):
+        for match in PATH.finditer(line) if path.suffix not in CAPTURED_OUTPUT else ():
             token = _clean(match.group("path"))
             if match.group("commit"):
                 if _in_commit(match.group("commit"), token) is False:
@@ -172,6 +179,8 @@ def test_the_check_finds_a_dangling_reference(tmp_path):
         ]
     )
     bad = dangling_references(fake, text)
+    captured = dangling_references(ROOT / "tests" / "fake_run.log", text)
+    assert captured == ["tests/fake_run.log:2: DESIGN" + ".md (not part of the repository)"], captured
     assert bad == [
         "tests/fake_note.md:1: experiments/no_such_study/RESULT.md",
         "tests/fake_note.md:2: DESIGN" + ".md (not part of the repository)",
