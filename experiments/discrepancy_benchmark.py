@@ -47,6 +47,7 @@ from peano_bayes.app.fanout import Unit, make_executor, run_units
 from peano_bayes.atomic import write_text
 from peano_bayes.effects import hideable
 from peano_bayes.errors import PeanoBayesInputError
+from peano_bayes.stats import wilson_interval
 from peano_bayes.validation.discovery_benchmark import (
     TWO_MOUNTS,
     Case,
@@ -57,7 +58,6 @@ from peano_bayes.validation.discovery_benchmark import (
     run_key,
     strength_for_snr,
 )
-from peano_bayes.validation.sbc import wilson_interval
 
 HERE = Path(__file__).resolve().parent
 TWO_EFFECTS = ("hysteresis", "flow_restriction")

@@ -30,11 +30,12 @@ from discrepancy_benchmark import cases
 
 from peano_bayes import enable_compilation_cache
 from peano_bayes.discovery import discovery_data
-from peano_bayes.discovery.diagnose import diagnose, holm
+from peano_bayes.discovery.diagnose import diagnose
 from peano_bayes.discovery.fitting import evaluate
 from peano_bayes.discovery.model import DEFAULT_BASE
 from peano_bayes.discovery.workflow import Gates, fit_base, matched_weights
 from peano_bayes.effects import LIBRARY, hideable, physics_effects
+from peano_bayes.stats import holm
 from peano_bayes.validation.discovery_benchmark import hidden_dataset, run_key
 
 DEFAULT_CASES = (*hideable(), "none", "none-veale")

@@ -60,6 +60,7 @@ from peano_bayes.effects import (
 from peano_bayes.inference.likelihood import predict
 from peano_bayes.inference.reduce import prepare
 from peano_bayes.physics import PARAMETERS
+from peano_bayes.stats import wilson_interval
 from peano_bayes.validation.discovery_benchmark import (
     TRUTH_CONFIG,
     TRUTH_PARAMS,
@@ -71,7 +72,6 @@ from peano_bayes.validation.discovery_benchmark import (
     strength_for_snr,
     true_parameters,
 )
-from peano_bayes.validation.sbc import wilson_interval
 
 # One xdist worker runs this group, so one compilation of the superset model serves every test here.
 pytestmark = pytest.mark.xdist_group("discovery")

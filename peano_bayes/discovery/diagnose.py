@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
+from ..stats import holm
 from .data import Covariates
 
 #: Random sign flips per p-value.
@@ -203,17 +204,6 @@ def signature_statistic(r: np.ndarray, w: np.ndarray, squared: bool = False, one
     return (max(projection, 0.0) if one_sided else abs(projection)) / float(norm)
 
 
-def holm(p: dict) -> dict:
-    """Holm's step-down adjustment of the p-values ``p`` (name -> p): the i-th smallest times (m - i), made
-    non-decreasing, capped at 1 (name -> adjusted p)."""
-    names = sorted(p, key=p.get)
-    out, running = {}, 0.0
-    for i, name in enumerate(names):
-        running = max(running, min(1.0, (len(names) - i) * p[name]))
-        out[name] = running
-    return out
-
-
 def sub_blocks(block: np.ndarray, k: int) -> np.ndarray:
     """Block ids (n,) with every block of ``block`` (runs of equal consecutive ids) split into consecutive runs of
     ``k`` bins."""
@@ -277,7 +267,6 @@ __all__ = [
     "SIGNATURE_BLOCK_BINS",
     "decay_after_reversal",
     "N_FLIPS",
-    "holm",
     "SIGNATURES",
     "diagnose",
     "sign_flip_p",

@@ -32,7 +32,6 @@ import numpy as np
 from scipy import stats
 
 from ..defaults import DEFAULT_CHUNK, DEFAULT_STARTS, DEFAULT_WARMUP
-from ..discovery.diagnose import holm
 from ..errors import PeanoBayesInputError
 from ..inference.driver import least_squares, posterior_at_mode, walker_start
 from ..inference.posterior import SPECIMEN_SD, Posterior, build_posterior, helmert
@@ -41,6 +40,7 @@ from ..inference.reduce import INPUT_ERROR_TESTS, prepare
 from ..inference.sample import sample, walker_count
 from ..physics import DEFAULT_CONFIG
 from ..rig import RigNoise, RigSimulationError, simulate_dataset
+from ..stats import holm, wilson_interval
 
 SBC_MATERIAL = "TP"
 SBC_FREE = ("tensile_ka_n_per_m", "bending_k1_n", "friction_pressure_fraction")
@@ -321,11 +321,6 @@ def replicate_unit(index: int, *, seed: int, **settings) -> dict:
     return row if specimens == 1 else {"specimens": specimens, **row}
 
 
-def wilson_interval(k: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
-    ci = stats.binomtest(k, n).proportion_ci(confidence_level=confidence, method="wilson")
-    return float(ci.low), float(ci.high)
-
-
 def rank_and_coverage(draws: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, dict[str, list[bool]]]:
     """The SBC statistics of one replicate: per quantity (draws (n, d), truth (d,)), the rank of the truth among
     :data:`RANK_DRAWS` draws evenly spaced over ``draws`` (how many lie below it: uniform on 0..RANK_DRAWS for
@@ -411,5 +406,4 @@ __all__ = [
     "replicate_unit",
     "run_replicate",
     "simulate",
-    "wilson_interval",
 ]
