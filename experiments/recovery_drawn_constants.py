@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import multiprocessing
 import os
 import sys
 from concurrent.futures import ProcessPoolExecutor
@@ -147,13 +148,22 @@ def main() -> int:
         print(json.dumps(result))
         return 0
     print(f"{len(done)} rows present, {len(plan)} to run", flush=True)
-    with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+
+    def record(key, row):
+        _append(rows_path, row)
+        inside = sum(p["inside"] for p in row["parameters"].values())
+        print(f"row {key}: {inside} of {len(row['parameters'])} inside, converged {row['converged']}", flush=True)
+
+    if args.jobs == 1:  # in this process: nothing to fork
+        for key in plan:
+            record(key, run_row(*key, str(args.out)))
+        return 0
+    # Spawned, not forked: this process has JAX loaded (through the truth's imports), and a forked child of a
+    # multithreaded JAX process can deadlock (one did, at its first least squares).
+    with ProcessPoolExecutor(max_workers=args.jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
         futures = {pool.submit(run_row, c, s, a, str(args.out)): (c, s, a) for c, s, a in plan}
         for future, key in futures.items():
-            row = future.result()
-            _append(rows_path, row)
-            inside = sum(p["inside"] for p in row["parameters"].values())
-            print(f"row {key}: {inside} of {len(row['parameters'])} inside, converged {row['converged']}", flush=True)
+            record(key, future.result())
     return 0
 
 
