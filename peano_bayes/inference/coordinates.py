@@ -22,7 +22,6 @@ import numpy as np
 
 from ..defaults import COORDINATE_KINDS
 from ..physics.elements import tensile_stretch
-from .kernels import SpreadRescale
 from .posterior import SPECIMEN_SD
 from .priors import Marginal
 
@@ -223,22 +222,6 @@ def sampler_coordinates(posterior, kind: str = "theta", noncentred: tuple[bool, 
     return contrasts if isinstance(base, Identity) else Composed(base, contrasts)
 
 
-def spread_rescale(posterior, noncentred: tuple[bool, ...] = ()) -> SpreadRescale | None:
-    """The funnel move (:class:`~peano_bayes.inference.kernels.SpreadRescale`) for ``posterior`` sampled in
-    :func:`sampler_coordinates` with the contrasts ``noncentred`` flags: the spread's entry and those of the
-    centred contrasts (a non-centred one already moves with the spread). None without contrasts or with every
-    contrast non-centred."""
-    n = getattr(posterior, "n_contrasts", 0)
-    if not n:
-        return None
-    flags = tuple(noncentred) or (False,) * n
-    names = posterior.prior.names
-    scaled = tuple(len(names) + k for k, f in enumerate(flags) if not f)
-    if not scaled:
-        return None
-    return SpreadRescale(names.index(SPECIMEN_SD), posterior.prior.marginals[SPECIMEN_SD], scaled)
-
-
 __all__ = [
     "COORDINATE_KINDS",
     "NONCENTRE_RATIO",
@@ -250,5 +233,4 @@ __all__ = [
     "choose_noncentred",
     "contrast_flags",
     "sampler_coordinates",
-    "spread_rescale",
 ]

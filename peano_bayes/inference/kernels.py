@@ -23,13 +23,11 @@ half-ensemble) and the move mix :func:`moves_for`.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
 from typing import NamedTuple, Protocol
 
 import emcee
 import numpy as np
 
-from .priors import Marginal
 from .warmup import IndependenceProposal
 
 #: Moves before any proposal is fitted (emcee's recommended differential-evolution mix).
@@ -40,72 +38,16 @@ MOVES = ((emcee.moves.DEMove, 0.8), (emcee.moves.DESnookerMove, 0.2))
 ADAPTED_MOVES = (0.4, 0.1, 0.5)
 
 
-#: Share of steps given to :class:`SpreadRescale` where a kernel has one (the other moves' weights are scaled
-#: down to leave it room).
-RESCALE_WEIGHT = 0.15
-
-
-@dataclass(frozen=True)
-class SpreadRescale:
-    """A Metropolis-Hastings move along the funnel of the specimen hierarchy: the spread's unconstrained value
-    ``u`` (entry ``index`` of the sampler's vector; ``marginal`` its prior, whose transform gives ``tau``) steps
-    by ``delta ~ N(0, step_sd^2)`` and every centred contrast (entries ``scaled``) is multiplied by
-    ``tau(u + delta) / tau(u)``, so that the contrasts in units of the spread stay where they are.
-
-    Why: centred contrasts ``c ~ N(0, tau^2)`` must shrink as ``tau`` does, so where the data leave the spread
-    free to approach zero the walkers meet a funnel whose neck the ensemble moves (which step along straight
-    lines between walkers) enter slowly; this move steps along the funnel's curve instead, the non-centred
-    parameterisation's natural move, while the other moves keep the centred one's (the interweaving idea of Yu
-    and Meng 2011). The map ``(u, c) -> (u + delta, c r)``, ``r = tau(u + delta) / tau(u)``, is undone by
-    ``-delta`` and has Jacobian determinant ``r^k`` (``k`` scaled contrasts), so the log Hastings factor is
-    ``k ln r``. emcee's contract: ``(coords (W, D), random) -> (new (W, D), log factors (W,))``."""
-
-    index: int
-    marginal: Marginal
-    scaled: tuple[int, ...]
-    step_sd: float = 0.5
-
-    def __call__(self, coords: np.ndarray, random: np.random.RandomState):
-        coords = np.asarray(coords, dtype=float)
-        delta = self.step_sd * random.standard_normal(coords.shape[0])
-        new = coords.copy()
-        new[:, self.index] = coords[:, self.index] + delta
-        tau = np.asarray(self.marginal.from_unconstrained(coords[:, self.index])[0], dtype=float)
-        tau_new = np.asarray(self.marginal.from_unconstrained(new[:, self.index])[0], dtype=float)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            log_ratio = np.log(tau_new) - np.log(tau)
-        log_ratio = np.where(np.isfinite(log_ratio), log_ratio, -np.inf)
-        idx = list(self.scaled)
-        new[:, idx] = coords[:, idx] * np.exp(np.where(np.isfinite(log_ratio), log_ratio, 0.0))[:, None]
-        return new, len(idx) * log_ratio
-
-    def tuned(self, proposal: IndependenceProposal | None) -> SpreadRescale:
-        """The move with its step set to the spread's sd under the warm-up's fitted ``proposal`` (unchanged
-        before one is fitted)."""
-        if proposal is None:
-            return self
-        sd = float(np.sqrt(proposal.covariance[self.index, self.index]))
-        return SpreadRescale(self.index, self.marginal, self.scaled, sd if np.isfinite(sd) and sd > 0 else 0.5)
-
-
-def moves_for(proposal: IndependenceProposal | None, rescale: SpreadRescale | None = None) -> list:
+def moves_for(proposal: IndependenceProposal | None) -> list:
     """emcee's move mix: :data:`MOVES` before a proposal is fitted, then :data:`ADAPTED_MOVES` with the
-    independence move (a Metropolis-Hastings step drawing from ``proposal``); with ``rescale``, that move too at
-    :data:`RESCALE_WEIGHT` (its step tuned to ``proposal``)."""
+    independence move (a Metropolis-Hastings step drawing from ``proposal``)."""
     if proposal is None:
-        mix = [(move(), weight) for move, weight in MOVES]
-    else:
-        de, snooker, independence = ADAPTED_MOVES
-        mix = [
-            (emcee.moves.DEMove(), de),
-            (emcee.moves.DESnookerMove(), snooker),
-            (emcee.moves.MHMove(proposal), independence),
-        ]
-    if rescale is None or not rescale.scaled:
-        return mix
-    rest = 1.0 - RESCALE_WEIGHT
-    return [(move, weight * rest) for move, weight in mix] + [
-        (emcee.moves.MHMove(rescale.tuned(proposal)), RESCALE_WEIGHT)
+        return [(move(), weight) for move, weight in MOVES]
+    de, snooker, independence = ADAPTED_MOVES
+    return [
+        (emcee.moves.DEMove(), de),
+        (emcee.moves.DESnookerMove(), snooker),
+        (emcee.moves.MHMove(proposal), independence),
     ]
 
 
@@ -132,21 +74,15 @@ class EmceeEnsemble:
     """:class:`EnsembleKernel` over emcee: ``density`` (W, D) -> (W,) log density in the sampler's coordinates
     (``-inf`` outside the support), ``n_walkers`` walkers in ``ndim`` dimensions."""
 
-    def __init__(
-        self,
-        density: Callable[[np.ndarray], np.ndarray],
-        ndim: int,
-        n_walkers: int,
-        rescale: SpreadRescale | None = None,
-    ):
-        self.density, self.ndim, self.n_walkers, self.rescale = density, ndim, n_walkers, rescale
+    def __init__(self, density: Callable[[np.ndarray], np.ndarray], ndim: int, n_walkers: int):
+        self.density, self.ndim, self.n_walkers = density, ndim, n_walkers
         self._sampler: emcee.EnsembleSampler | None = None
 
     def init(self, position, log_prob, random_state) -> KernelState:
         return KernelState(np.asarray(position), np.asarray(log_prob), random_state)
 
     def steps(self, state: KernelState, n: int, proposal: IndependenceProposal | None) -> Iterator[KernelState]:
-        moves = moves_for(proposal, self.rescale)
+        moves = moves_for(proposal)
         self._sampler = emcee.EnsembleSampler(self.n_walkers, self.ndim, self.density, vectorize=True, moves=moves)
         start = emcee.State(state.position, log_prob=state.log_prob, random_state=state.random_state)
         for s in self._sampler.sample(start, iterations=n):
@@ -159,13 +95,4 @@ class EmceeEnsemble:
         return s.get_chain(), s.get_log_prob(), s.acceptance_fraction
 
 
-__all__ = [
-    "ADAPTED_MOVES",
-    "MOVES",
-    "RESCALE_WEIGHT",
-    "EmceeEnsemble",
-    "EnsembleKernel",
-    "KernelState",
-    "SpreadRescale",
-    "moves_for",
-]
+__all__ = ["ADAPTED_MOVES", "MOVES", "EmceeEnsemble", "EnsembleKernel", "KernelState", "moves_for"]
