@@ -60,7 +60,6 @@ from peano_bayes.effects import (
 from peano_bayes.inference.likelihood import predict
 from peano_bayes.inference.reduce import prepare
 from peano_bayes.physics import PARAMETERS
-from peano_bayes.stats import wilson_interval
 from peano_bayes.validation.discovery_benchmark import (
     TRUTH_CONFIG,
     TRUTH_PARAMS,
@@ -405,13 +404,6 @@ def test_sub_blocks_split_each_block_into_consecutive_runs_of_k_bins():
     np.testing.assert_array_equal(np.diff(got) != 0, [0, 1, 0, 1, 1, 0, 1, 1, 0])
     whole = sub_blocks(block, 10)  # k at least a block's length: the blocks themselves
     np.testing.assert_array_equal(np.diff(whole) != 0, np.diff(block) != 0)
-
-
-def test_wilson_interval_known_values():
-    low, high = wilson_interval(0, 10)
-    assert low == 0.0 and high == pytest.approx(0.2775, abs=1e-4)
-    low, high = wilson_interval(10, 10)
-    assert low == pytest.approx(0.7225, abs=1e-4) and high == 1.0
 
 
 def test_discover_cli_names_hidden_hysteresis_and_shrinks_the_gap(hysteresis_data, tmp_path, capsys):
