@@ -57,6 +57,7 @@ from peano_bayes.effects import (
     noise_effects,
     physics_effects,
 )
+from peano_bayes.errors import PeanoBayesInputError
 from peano_bayes.inference.likelihood import predict
 from peano_bayes.inference.reduce import prepare
 from peano_bayes.physics import PARAMETERS
@@ -911,8 +912,6 @@ def test_the_gap_is_scored_against_the_noise_free_truth_on_the_registry_test():
     mean 0); and truth_gap reads a model's held-out predictions against it on the effect's scored test: a
     model 0.3 N off the truth everywhere before and exact after gives before 0.3 N, after 0, and an effective
     SNR of 0.3 / 0.2 = 1.5."""
-    from peano_bayes.discovery.fitting import Evaluation
-    from peano_bayes.discovery.workflow import Discovery
     from peano_bayes.validation.discovery_benchmark import noise_free_dataset, truth_gap
 
     case = Case(("hysteresis",), 4.0)
@@ -925,25 +924,55 @@ def test_the_gap_is_scored_against_the_noise_free_truth_on_the_registry_test():
 
     split = discovery_data(noisy, tests=QUASI_STATIC)
     truth = discovery_data(quiet, tests=QUASI_STATIC)
-
-    def evaluation(data, offset):
-        predicted = np.concatenate([np.ravel(g.observed) for g in data.groups]) + offset
-        return Evaluation(predicted * 0, predicted * 0, predicted, predicted * 0, True)
-
-    result = Discovery(
-        {},
-        split,
-        evaluation(truth.fit, 0.3),
-        evaluation(truth.fit, 0.0),
-        evaluation(truth.held_out, 0.3),
-        evaluation(truth.held_out, 0.0),
-    )
-    gap = truth_gap(case, 110, result, strengths, QUASI_STATIC)
+    gap = truth_gap(case, 110, _offset_discovery(split, truth, 0.3), strengths, QUASI_STATIC)
     assert LIBRARY["hysteresis"].scored_test == gap["gap_test"] == "load_cycle"
     scored = gap["truth_gap"]["hysteresis"]
     assert scored["before"] == pytest.approx(0.3, rel=1e-9) and scored["after"] == pytest.approx(0.0, abs=1e-12)
     assert gap["gap_ratio"] == pytest.approx(0.0, abs=1e-12)
     assert scored["effective_snr"] == pytest.approx(1.5, rel=1e-9)
+
+
+def _offset_discovery(split, truth, offset):
+    """A stand-in :class:`Discovery` of ``split`` whose base model is ``offset`` off the noise-free bins ``truth``
+    everywhere and whose final model is exact."""
+    from peano_bayes.discovery.fitting import Evaluation
+    from peano_bayes.discovery.workflow import Discovery
+
+    def evaluation(data, shift):
+        predicted = np.concatenate([np.ravel(g.observed) for g in data.groups]) + shift
+        return Evaluation(predicted * 0, predicted * 0, predicted, predicted * 0, True)
+
+    return Discovery(
+        {},
+        split,
+        evaluation(truth.fit, offset),
+        evaluation(truth.fit, 0.0),
+        evaluation(truth.held_out, offset),
+        evaluation(truth.held_out, 0.0),
+    )
+
+
+def test_the_gap_is_scored_where_the_noise_free_signals_have_no_noise_to_estimate():
+    """Seed 196's drawn conditions (100 Hz) give noise-free strain signals whose second differences are exactly
+    0, so the noise-free session alone cannot be binned by discovery (it refuses a signal without noise); the
+    truth is binned with the noisy session's noise, and giving a session its own noise estimate changes none of
+    its bins."""
+    from peano_bayes.validation.discovery_benchmark import noise_free_dataset, truth_gap
+
+    case, strengths = Case(("hysteresis",), 2.0, conditions="drawn"), {"hysteresis": 0.5}
+    noisy, quiet = hidden_dataset(case, 196, strengths), noise_free_dataset(case, 196, strengths)
+    with pytest.raises(PeanoBayesInputError, match="shows no noise"):
+        discovery_data(quiet, tests=QUASI_STATIC)
+    split = discovery_data(noisy, tests=QUASI_STATIC)
+    again = discovery_data(noisy, tests=QUASI_STATIC, noise=split.noise_sd)
+    for a, b in zip(split.both.groups, again.both.groups, strict=True):
+        np.testing.assert_array_equal(a.observed, b.observed)
+    for a, b in zip(split.fit.sd, again.fit.sd, strict=True):
+        np.testing.assert_array_equal(a, b)
+    truth = discovery_data(quiet, tests=QUASI_STATIC, noise=split.noise_sd)
+    gap = truth_gap(case, 196, _offset_discovery(split, truth, 0.3), strengths, QUASI_STATIC)
+    scored = gap["truth_gap"]["hysteresis"]
+    assert scored["before"] == pytest.approx(0.3, rel=1e-9) and scored["after"] == pytest.approx(0.0, abs=1e-12)
 
 
 def test_the_stroke_inputs_error_is_estimated_from_the_fitted_runs_as_the_inference_integrates_it():

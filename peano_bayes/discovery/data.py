@@ -274,10 +274,16 @@ def discovery_data(
     tests=None,
     bin_sizes=DISCOVERY_BIN_SIZES,
     every_sample=DISCOVERY_EVERY_SAMPLE,
+    noise: dict | None = None,
 ) -> SplitData:
     """Bin ``specimen``'s runs (default: the first specimen) of ``tests`` (default: all), split them (see the
     module docstring), estimate the noise and collect covariates. Raises :class:`PeanoBayesInputError` for an
-    unknown specimen or test, or when no condition has a second run to hold out."""
+    unknown specimen or test, when no condition has a second run to hold out, or when a test's observed signal
+    shows no noise to scale residuals by.
+
+    ``noise``: test -> sensor noise sd of one raw sample [signal unit] to use instead of estimating it from the
+    runs; for a noise-free copy of a session (the benchmark's truth), whose signals have no noise to estimate,
+    binned with the noisy session's."""
     specimens = tuple(dataset.specimens)
     specimen = specimens[0] if specimen is None else specimen
     if specimen not in specimens:
@@ -303,7 +309,7 @@ def discovery_data(
     for run in runs:
         session_start[run.key] = elapsed
         elapsed += float(run.time_s[-1] - run.time_s[0])
-    noise = _sensor_noise(runs, specimen)
+    noise = _sensor_noise(runs, specimen) if noise is None else {test: float(noise[test]) for test in tests}
     observations = prepare(
         one, bin_sizes, share_repeats=False, every_sample=every_sample, input_errors=DISCOVERY_INPUT_ERRORS
     )

@@ -501,7 +501,9 @@ def truth_gap(case: Case, seed: int, result, strengths: dict | None = None, test
     if not case.effects:
         return rows
     split = result.split
-    quiet = discovery_data(noise_free_dataset(case, seed, strengths), tests=tests)
+    # The noise-free signals have no sensor noise to estimate (their second differences can be exactly 0); only
+    # their bin means are read here, binned as the noisy session's, with its noise.
+    quiet = discovery_data(noise_free_dataset(case, seed, strengths), tests=tests, noise=split.noise_sd)
     if quiet.fit_runs != split.fit_runs or quiet.held_out_runs != split.held_out_runs:
         raise RuntimeError("the noise-free session's runs do not match the noisy session's")
     truth = {
