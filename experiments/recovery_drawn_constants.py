@@ -24,6 +24,12 @@ a fit of these data is slow here (the first fit of each arm, TP 7101, had not co
 7500 sampled, about an hour of one core each, the rule's tau_max still growing at 301 and 273 steps);
 ``--analyse --arms held`` analyses that arm alone.
 
+Amended again 2026-12-06, with 9 held rows in (TP, PR, PC; 657-8658 steps each) and FC 7101 held running: a
+fit is capped at :data:`MAX_STEPS` (12000) steps, not ``fit``'s default 40000. Each working session here runs on
+a new machine and a fit's resume state (gitignored, 70-200 MB) does not outlive it, so a fit longer than one
+session never finishes; FC 7101 held was at 8700 steps after 75 minutes of one core, its tau_max 708 and growing,
+R-hat 1.38. A fit that reaches the cap is unconverged: listed, not scored, as any unconverged fit.
+
 Each finished fit appends one JSON row to ``DIR/rows.jsonl`` (atomically: the row is written whole or not at
 all); a restarted run skips the rows present, so the study may span sessions. ``--analyse`` reads the rows and
 prints the pooled figures, the last line one JSON object; it refuses while rows are missing.
@@ -46,6 +52,8 @@ MATERIALS = ("TP", "PR", "PC", "FC")
 SEEDS = (7101, 7102, 7103)
 ARMS = ("held", "sampled")
 TARGET = 0.90
+#: Steps a fit may take (second amendment above): about two hours of one core here beside another study.
+MAX_STEPS = 12_000
 NOT_PHYSICS = ("noise_", "specimen_")
 
 
@@ -87,7 +95,7 @@ def run_row(code: str, seed: int, arm: str, out: str) -> dict:
     label = f"{code}_{seed}_{arm}"
     summary = infer(
         data, Path(out) / "fits", label=label, seed=seed, sample_all=arm == "sampled", progress=False,
-        figures=False, log=lambda m: print(f"{label}: {m}", flush=True),
+        figures=False, log=lambda m: print(f"{label}: {m}", flush=True), max_steps=MAX_STEPS,
         resume=(Path(out) / "fits" / label / "sampler_state.npz").exists(),
     )  # fmt: skip
     idata = load_result(Path(out) / "fits" / label)
