@@ -73,6 +73,8 @@ from peano_bayes.validation.discovery_benchmark import (
     true_parameters,
 )
 
+from .helpers import jit_lean
+
 # One xdist worker runs this group, so one compilation of the superset model serves every test here.
 pytestmark = pytest.mark.xdist_group("discovery")
 
@@ -222,8 +224,8 @@ def test_superset_at_off_equals_the_model_without_the_elements():
             continue
         group = type(group)(**{**group.__dict__, "specimen_index": np.zeros_like(group.specimen_index)})
         plain = {k: v for k, v in params.items() if k in TRUTH_CONFIG.parameter_names()}
-        superset, _ = jax.jit(lambda p, g: predict(p, g, config=SUPERSET_CONFIG))(params, group)
-        ideal, _ = jax.jit(lambda p, g: predict(p, g, config=TRUTH_CONFIG))(plain, group)
+        superset, _ = jit_lean(lambda p, g: predict(p, g, config=SUPERSET_CONFIG))(params, group)
+        ideal, _ = jit_lean(lambda p, g: predict(p, g, config=TRUTH_CONFIG))(plain, group)
         tolerance = 1e-9 if group.test == "load_cycle" else 1e-6  # N / strain
         np.testing.assert_allclose(np.asarray(superset), np.asarray(ideal), atol=tolerance, err_msg=group.test)
 

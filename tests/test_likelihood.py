@@ -32,6 +32,8 @@ from peano_bayes.inference.reduce import (
 from peano_bayes.physics import DEFAULT_CONFIG, ModelConfig
 from peano_bayes.rig import RigNoise, RigProtocol, simulate_dataset
 
+from .helpers import jit_lean
+
 NOISE = {
     "noise_load_cycle_force_n": 0.2,
     "noise_blocking_force_n": 0.2,
@@ -85,7 +87,7 @@ def test_prepare_stacks_runs_and_keeps_every_sample(dataset):
     assert cycle.observed.shape[0] == 2  # the 0 kPa and the test-pressure cycle, one vmapped simulation
 
 
-@partial(jax.jit, static_argnums=2)
+@partial(jit_lean, static_argnums=2)
 def _total_and_pointwise(params, groups, geometry):
     """The total and the pointwise log-likelihood from one compiled program: the run groups are an argument,
     not constants of the program, so the tests of this module evaluating ``dataset`` share it."""
@@ -140,7 +142,7 @@ def test_binning_barely_moves_the_likelihood_surface(dataset, truth):
 
     def profile(k):
         obs = prepare(cycles, {"load_cycle": k})
-        ll = jax.jit(jax.vmap(lambda ka: log_likelihood({**truth, **NOISE, "tensile_ka_n_per_m": ka}, obs)))
+        ll = jit_lean(jax.vmap(lambda ka: log_likelihood({**truth, **NOISE, "tensile_ka_n_per_m": ka}, obs)))
         values = np.asarray(ll(grid))
         c2, c1, _ = np.polyfit(np.log(np.asarray(grid)), values, 2)
         return -c1 / (2.0 * c2), -2.0 * c2  # peak in log(ka) and curvature
@@ -189,7 +191,7 @@ def test_segment_binning_barely_moves_the_likelihood_surface_at_100_hz(fast_rig,
     grid = truth["tensile_ka_n_per_m"] * jnp.exp(jnp.linspace(-0.1, 0.1, 9))
 
     def profile(obs):
-        ll = jax.jit(jax.vmap(lambda ka: log_likelihood({**truth, **NOISE, "tensile_ka_n_per_m": ka}, obs)))
+        ll = jit_lean(jax.vmap(lambda ka: log_likelihood({**truth, **NOISE, "tensile_ka_n_per_m": ka}, obs)))
         values = np.asarray(ll(grid))
         c2, c1, _ = np.polyfit(np.log(np.asarray(grid)), values, 2)
         return -c1 / (2.0 * c2), -2.0 * c2

@@ -1,7 +1,6 @@
 """The sampler's log posterior: specimen contrasts, which parameters are sampled, never NaN; and that denoising
 the driving inputs removes the errors-in-variables excess from the stroke residuals."""
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -11,6 +10,8 @@ from peano_bayes.inference.likelihood import predict
 from peano_bayes.inference.posterior import STEP_ONLY_PARAMETERS, build_posterior, helmert
 from peano_bayes.physics import DEFAULT_CONFIG
 from peano_bayes.rig import RigNoise, simulate_dataset
+
+from .helpers import jit_lean
 
 
 @pytest.mark.parametrize("n", [1, 2, 3, 5])
@@ -130,7 +131,7 @@ def test_denoised_inputs_bring_stroke_residuals_down_to_the_sensor_noise():
 
     def z(obs):
         group = obs.groups[0]
-        pred, _ = jax.jit(lambda p: predict(p, group))(truth)
+        pred, _ = jit_lean(lambda p: predict(p, group))(truth)
         z = (group.observed - np.asarray(pred)) / (sigma / np.sqrt(group.counts))
         return float(np.sqrt(np.nanmean(z**2)))
 

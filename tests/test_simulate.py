@@ -34,7 +34,7 @@ from peano_bayes.physics import (
 )
 from peano_bayes.physics.simulate import _LOG_THETA, _solve_log_theta
 
-from .helpers import central_difference
+from .helpers import central_difference, jit_lean
 
 #: Every element on: the configuration the NaN/inf sweep covers.
 SUPERSET = ModelConfig(
@@ -216,7 +216,7 @@ def superset_box():
         signals, residuals = _all_tests(p, SUPERSET)
         return sum(jnp.mean(signal) for signal in signals[:4]), (signals, residuals)
 
-    grads, (signals, residuals) = jax.jit(jax.vmap(jax.grad(summary, has_aux=True)))(batch)
+    grads, (signals, residuals) = jit_lean(jax.vmap(jax.grad(summary, has_aux=True)))(batch)
     return grads, signals, residuals
 
 
@@ -302,8 +302,8 @@ def test_quasi_static_gradients_match_finite_differences(name):
     objective = QUASI_STATIC[name]
     params = {k: float(v) for k, v in SUPERSET.nominal_parameters().items()}
     params.update(damping_up_ns_per_m=30.0, damping_down_ns_per_m=20.0, damping_quadratic_ns2_per_m2=5.0)
-    value = jax.jit(objective)
-    grads = jax.jit(jax.grad(objective))({k: jnp.asarray(v) for k, v in params.items()})
+    value = jit_lean(objective)
+    grads = jit_lean(jax.grad(objective))({k: jnp.asarray(v) for k, v in params.items()})
     f0 = abs(float(value(params)))
     for key in SUPERSET.parameter_names():
         fd = central_difference(value, params, key, rel_step=1e-3)
@@ -339,8 +339,8 @@ def test_step_gradients_match_finite_differences(case):
         params = {k: nominal_params[k] * jnp.exp(log_scale[i]) for i, k in enumerate(names)}
         return jnp.sum(weights * simulate_step(params, protocol, config=config).strain)
 
-    value = jax.jit(objective)
-    grad = jax.jit(jax.grad(objective))(jnp.zeros(len(names)))
+    value = jit_lean(objective)
+    grad = jit_lean(jax.grad(objective))(jnp.zeros(len(names)))
     rng = np.random.default_rng(7)
     for _ in range(3):
         direction = rng.normal(size=len(names))
@@ -354,7 +354,7 @@ def test_step_gradient_is_finite_with_kinked_elements():
     """With friction and reversals the gradient is the one-sided derivative of the discrete map: finite."""
     config = ModelConfig(flow="laminar", damping=True)
     params = {k: jnp.asarray(v) for k, v in config.nominal_parameters().items()}
-    grads = jax.grad(lambda p: jnp.sum(simulate_step(p, step_protocol(), config=config).strain))(params)
+    grads = jit_lean(jax.grad(lambda p: jnp.sum(simulate_step(p, step_protocol(), config=config).strain)))(params)
     assert all(np.isfinite(float(g)) for g in grads.values())
 
 
@@ -369,7 +369,7 @@ _FOUR_TESTS = {
 }
 
 
-@jax.jit
+@jit_lean
 def _four_tests_mount_and_film(ka_n_per_m, compliance_m_per_n):
     """The four tests with a linear film ``ka`` plus a mount ``compliance``, and with the film alone at the
     series stiffness ``ka / (1 + ka compliance)`` and no mount."""
