@@ -83,6 +83,8 @@ QUASI_STATIC = ("load_cycle", "blocking", "stroke")
 # then holds one test's simulator instead of three, which cut these tests' time about sixfold (measured side by
 # side); multi-test data handling is tested on QUASI_STATIC by the unit tests here.
 LOAD_CYCLES = ("load_cycle",)
+# The stroke-input test's seed; the session-baseline test evaluates the same split (one compilation for both).
+STROKE_SEED = 106
 DESIGN_EFFECTS = (
     "hysteresis",
     "viscoelastic_relaxation",
@@ -132,27 +134,33 @@ def test_model_spec_pins_inactive_effects_at_off():
     }
 
 
-def test_session_baseline_adds_legendre_polynomials_of_session_time_to_the_force_only():
+def test_session_baseline_adds_legendre_polynomials_of_session_time_to_the_force_only(hysteresis_data):
     """The flexible baseline: force bins shift by c1 P1(s) + c2 P2(s) + c3 P3(s), with s the bin's session time
-    scaled to [-1, 1]; strain bins do not move; at off (all zero) nothing moves."""
-    # a force test and a strain test; the load cycles' simulator would only add compilation
-    split = discovery_data(hidden_dataset(Case(), seed=103), tests=("blocking", "stroke"))
+    scaled to [-1, 1]; strain bins do not move; at off (all zero) nothing moves. A force test (the load cycles of
+    the discover CLI test's data) and a strain test (the stroke-input test's runs), each in the data shape its
+    own test evaluates, so the superset compiles for no shape of this test's own."""
     x0 = model_spec(DEFAULT_BASE, TRUTH_PARAMS).pinned
     x1 = x0.copy()
     c = {"baseline_p1_n": 0.3, "baseline_p2_n": -0.2, "baseline_p3_n": 0.1}
     for name, value in c.items():
         x1[NAMES.index(name)] = value
-    data = split.both
-    shift = np.asarray(pointwise(x1, data).predicted) - np.asarray(pointwise(x0, data).predicted)
-    s = np.concatenate([np.ravel(a) for a in data.session])
-    session_s = np.concatenate([split.fit_covariates.session_s, split.held_out_covariates.session_s])
-    assert s.min() >= -1.0 and s.max() <= 1.0 and s.max() - s.min() > 1.9
-    np.testing.assert_allclose(s, np.polyval(np.polyfit(session_s, s, 1), session_s), atol=1e-9)  # affine in time
-    expected = 0.3 * s - 0.2 * 0.5 * (3 * s**2 - 1) + 0.1 * 0.5 * (5 * s**3 - 3 * s)
-    test = np.concatenate([split.fit_covariates.test, split.held_out_covariates.test])
-    force = np.isin(test, ("load_cycle", "blocking"))
-    np.testing.assert_allclose(shift[force], expected[force], atol=1e-9)
-    np.testing.assert_allclose(shift[~force], 0.0, atol=1e-12)
+    splits = {
+        "load_cycle": discovery_data(hysteresis_data, tests=LOAD_CYCLES),
+        "stroke": discovery_data(hidden_dataset(Case(), seed=STROKE_SEED), tests=("stroke",)),
+    }
+    for test, split in splits.items():
+        data = split.both
+        assert {g.test for g in data.groups} == {test}
+        shift = np.asarray(pointwise(x1, data).predicted) - np.asarray(pointwise(x0, data).predicted)
+        s = np.concatenate([np.ravel(a) for a in data.session])
+        session_s = np.concatenate([split.fit_covariates.session_s, split.held_out_covariates.session_s])
+        assert s.min() >= -1.0 and s.max() <= 1.0 and s.max() - s.min() > 1.9, test
+        np.testing.assert_allclose(s, np.polyval(np.polyfit(session_s, s, 1), session_s), atol=1e-9)  # affine
+        if test == "load_cycle":  # force [N]
+            expected = 0.3 * s - 0.2 * 0.5 * (3 * s**2 - 1) + 0.1 * 0.5 * (5 * s**3 - 3 * s)
+            np.testing.assert_allclose(shift, expected, atol=1e-9)
+        else:  # strain
+            np.testing.assert_allclose(shift, 0.0, atol=1e-12)
     assert set(BASELINE_PARAMETERS) == set(c) and all(LIBRARY["session_baseline"].off[p] == 0.0 for p in c)
 
 
@@ -983,7 +991,7 @@ def test_the_stroke_inputs_error_is_estimated_from_the_fitted_runs_as_the_infere
     mean of its runs' errors; the profiled cost |r|^2 + |a|^2 of the fitted runs equals the quadratic form of
     the integrated likelihood, with the prediction's derivative along each column by finite differences of the
     simulation; held-out runs take the fitted runs' estimate and never inform it."""
-    dataset = hidden_dataset(Case(), seed=106)
+    dataset = hidden_dataset(Case(), seed=STROKE_SEED)
     split = discovery_data(dataset, tests=("stroke",))
     own = replace(dataset, runs=tuple(r for r in dataset.runs if r.specimen == split.specimen and r.test == "stroke"))
     (reduced,) = prepare(own, DISCOVERY_BIN_SIZES, share_repeats=False, every_sample=DISCOVERY_EVERY_SAMPLE).groups
