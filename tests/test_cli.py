@@ -73,6 +73,15 @@ def own_muscle(tmp_path):
     return save(relabelled, tmp_path / "VM_first.csv")
 
 
+def test_a_fit_says_which_asked_for_tests_the_file_lacks(own_muscle, tmp_path):
+    """The default tests are the load cycles, blocking and stroke; a file of load cycles alone is fitted on them,
+    and the log says so (here the fit then stops at its missing prior, before any work)."""
+    lines = []
+    with pytest.raises(PeanoBayesInputError, match="'VM'"):
+        pipeline.infer(load(own_muscle), tmp_path / "out", log=lines.append)
+    assert "VM: the file has no blocking, stroke runs; fitting load_cycle only" in lines
+
+
 def test_fit_of_an_unknown_material_without_a_prior_names_the_option(own_muscle, tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["fit", str(own_muscle), "--out", str(out)]) == 2
@@ -297,9 +306,7 @@ def test_an_os_error_that_names_no_path_is_a_failed_computation(monkeypatch, cap
 
 def test_a_negative_seed_is_refused_by_every_command_that_takes_one(capsys):
     for argv in (["fit", "TP", "--out", "x"], ["metrics", "x"], ["discover", "TP", "--out", "x"], ["run"]):
-        with pytest.raises(SystemExit) as stop:
-            main([*argv, "--seed", "-1"])
-        assert stop.value.code == 2
+        assert main([*argv, "--seed", "-1"]) == 2
         assert "argument --seed: expected a whole number >= 0, got '-1'" in capsys.readouterr().err
 
 
@@ -357,10 +364,56 @@ def test_bad_invocations_are_refused_up_front_with_what_was_expected(tmp_path, c
     out = tmp_path / "r"
     assert main(["run", "--out", str(out), "--materials", "P", "p"]) == 2  # codes are case-blind
     assert "--materials: P given more than once" in capsys.readouterr().err and not out.exists()
-    with pytest.raises(SystemExit) as stop:
-        main(["fit", "TP", "--out", str(out), "--resume", "--force"])
-    assert stop.value.code == 2 and "not allowed with argument" in capsys.readouterr().err
+    assert main(["fit", "TP", "--out", str(out), "--resume", "--force"]) == 2
+    assert "not allowed with argument" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_a_command_line_that_cannot_be_parsed_answers_under_json_with_the_commands_own_usage(tmp_path, capsys):
+    """argparse's refusals exit 2 like any bad input: under --json stdout holds the one error object; an option
+    the command does not take is reported with that command's usage, not the top level's; an option every
+    command takes, put before the command's name, is told where it goes."""
+    assert main(["demo", "--json", "--pressures-kpa", "abc"]) == 2
+    captured = capsys.readouterr()
+    assert json.loads(captured.out) == {
+        "error": "error: argument --pressures-kpa: invalid float value: 'abc'",
+        "exit_status": 2,
+    }
+    assert captured.err.startswith("usage: peano-bayes demo") and "Traceback" not in captured.err
+    out = tmp_path / "r"
+    assert main(["run", "--out", str(out), "--prior", "p.toml"]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err.startswith("usage: peano-bayes run")
+    assert "peano-bayes run: error: unrecognized arguments: --prior p.toml" in captured.err and not out.exists()
+    assert main(["--json", "check", "TP"]) == 2
+    captured = capsys.readouterr()
+    assert "--json goes after the command's name: peano-bayes check --json" in captured.err
+    assert json.loads(captured.out)["exit_status"] == 2
+    assert main([]) == 2 and "required: COMMAND" in capsys.readouterr().err
+
+
+def test_an_out_that_is_a_file_or_empty_is_refused_by_the_fitting_commands(tmp_path, capsys):
+    taken = tmp_path / "taken"
+    taken.write_text("a file")
+    for argv in (["fit", "TP"], ["fit-many", "TP", "FC"], ["run"]):
+        assert main([*argv, "--out", str(taken)]) == 2, argv
+        assert f"--out {taken}: a file; expected a folder (existing or new)" in capsys.readouterr().err, argv
+    assert main(["fit", "TP", "--out", ""]) == 2
+    assert "--out: an empty path; expected a folder" in capsys.readouterr().err
+    assert taken.read_text() == "a file"
+
+
+def test_the_step_limit_help_says_how_each_command_continues_a_run(capsys):
+    """``fit`` continues with --resume; ``run`` and ``fit-many`` have no such option: they resume by themselves."""
+    helps = {}
+    for name in ("fit", "run", "fit-many"):
+        with pytest.raises(SystemExit):
+            main([name, "--help"])
+        helps[name] = " ".join(capsys.readouterr().out.split())
+    assert "so --resume with a larger limit continues it" in helps["fit"]
+    for name in ("run", "fit-many"):
+        assert "so the same command again with a larger limit continues it" in helps[name]
+        assert "--resume" not in helps[name] and "<label>" not in helps[name]
 
 
 @pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs a /proc file system, where no file can be made")

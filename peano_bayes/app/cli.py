@@ -7,8 +7,9 @@ and marked unconverged); 130 interrupted (Ctrl-C).
 
 ``--json`` makes standard output carry only one JSON object (standard JSON: a value that is not finite is
 ``null``): the command's result, or, when it stops with status 1, 2 or 130, ``{"error": message,
-"exit_status": N}``; everything else (messages, progress) goes to standard error. (A command line that
-argparse itself cannot parse exits 2 with its usage message only.) ``--quiet`` keeps only warnings and
+"exit_status": N}``, also when the command line itself cannot be parsed (then its usage goes to standard
+error); everything else (messages, progress) goes to standard error. An option the command does not know is
+reported with that command's usage. ``--quiet`` keeps only warnings and
 errors; ``--verbose`` adds tracebacks of failed computations. ``--help`` and ``--version`` do not import JAX.
 The compiled programs are cached on disk (``$PEANO_BAYES_CACHE``, default ``~/.cache/peano_bayes/jax``), so a
 second run skips most compilation.
@@ -39,9 +40,33 @@ _EPILOG = (
 )
 
 
+#: The options every command takes (after its name).
+COMMON_OPTIONS = ("--json", "-q", "--quiet", "-v", "--verbose")
+
+
+class UsageError(Exception):
+    """A command line that cannot be parsed: ``message`` and the ``parser`` (a command's, or the top level's)
+    whose usage applies."""
+
+    def __init__(self, parser: argparse.ArgumentParser, message: str):
+        super().__init__(message)
+        self.parser, self.message = parser, message
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser, raising :class:`UsageError` where argparse would print and exit, so that the caller
+    can answer under ``--json`` too; ``commands`` maps each command name to its parser."""
+
+    commands: dict[str, argparse.ArgumentParser]
+
+    def error(self, message):
+        raise UsageError(self, message)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of every registered command (imports no JAX)."""
-    parser = argparse.ArgumentParser(
+    """The argument parser of every registered command (imports no JAX). Its ``parse_args`` raises
+    :class:`UsageError` on a command line it cannot parse."""
+    parser = _Parser(
         prog="peano-bayes",
         description="Bayesian material-property inference workbench for Peano fluidic muscles.",
         epilog=_EPILOG,
@@ -53,10 +78,27 @@ def build_parser() -> argparse.ArgumentParser:
     talk.add_argument("-q", "--quiet", action="store_true", help="print only warnings and errors")
     talk.add_argument("-v", "--verbose", action="store_true", help="also print tracebacks of failed computations")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    parser.commands = {}
     for name, command in COMMANDS.items():
         p = sub.add_parser(name, parents=[common], help=command.help, description=command.help, epilog=_EPILOG)
         command.arguments(p)
+        parser.commands[name] = p
     return parser
+
+
+def parse(parser: argparse.ArgumentParser, argv: list[str]) -> argparse.Namespace:
+    """``argv`` parsed; an option or argument the command does not take raises :class:`UsageError` with the
+    command's own usage, and says where an option every command takes belongs (after the command's name)."""
+    args, extra = parser.parse_known_args(argv)
+    if extra:
+        misplaced = [a for a in extra if a in COMMON_OPTIONS]
+        where = (
+            f" ({' '.join(misplaced)} goes after the command's name: peano-bayes {args.command} {misplaced[0]} ...)"
+            if misplaced
+            else ""
+        )
+        raise UsageError(parser.commands[args.command], f"unrecognized arguments: {' '.join(extra)}{where}")
+    return args
 
 
 def _use_compilation_cache() -> None:
@@ -105,8 +147,16 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _main(argv: list[str] | None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parse(parser, argv)
+    except UsageError as err:
+        err.parser.print_usage(sys.stderr)
+        print(f"{err.parser.prog}: error: {err.message}", file=sys.stderr)
+        if "--json" in argv:
+            print(json.dumps({"error": f"error: {err.message}", "exit_status": EXIT_BAD_INPUT}))
+        return EXIT_BAD_INPUT
     command = COMMANDS[args.command]
     if args.quiet and hasattr(args, "no_progress"):
         args.no_progress = True

@@ -239,8 +239,11 @@ def infer(
     dataset = load(data) if not isinstance(data, Dataset) else data
     # The sensors' noise from every run of the file, before tests are left out: the quiet tests estimate it best.
     noise = sensor_noise(dataset.runs)
+    absent = [t for t in dict.fromkeys(tests) if t not in dataset.tests]
     dataset = select_tests(dataset, tests)
     code = dataset.material.code
+    if absent:  # said, not silent: the fit uses fewer tests than asked for
+        log(f"{code}: the file has no {', '.join(absent)} runs; fitting {', '.join(dataset.tests)} only")
     whole_prior = prior_of(dataset, prior)
     out = Path(out_dir) / _check_label(_default_label(dataset) if label is None else label)
     choice = _model_choice(dataset, whole_prior.config, out, discover=discover, resume=resume, log=log)

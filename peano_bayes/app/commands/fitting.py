@@ -22,11 +22,13 @@ from ...defaults import (
     DEFAULT_WARMUP,
 )
 from ...errors import PeanoBayesInputError
-from .registry import _DATA_HELP, _seed, command
+from .registry import _DATA_HELP, _seed, _writable_folder, command
 
 
-def _sampling_arguments(p, *, discover_by_default: bool = False):
-    """The fit's options; ``discover_by_default`` (the main job): discovery runs unless ``--no-discover``."""
+def _sampling_arguments(p, *, discover_by_default: bool = False, continued_by: str = "--resume"):
+    """The fit's options; ``discover_by_default`` (the main job): discovery runs unless ``--no-discover``;
+    ``continued_by``: how a run stopped at its step limit is continued (``fit``: ``--resume``; ``run`` and
+    ``fit-many`` resume by themselves: the same command again)."""
     p.add_argument("--seed", type=_seed, default=0, help="seed of the starts and the sampler (default: 0)")
     p.add_argument(
         "--tests",
@@ -61,7 +63,7 @@ def _sampling_arguments(p, *, discover_by_default: bool = False):
         type=int,
         default=DEFAULT_MAX_STEPS,
         help=f"step limit (default: {DEFAULT_MAX_STEPS}); beyond it the run is unconverged and its state is kept, "
-        "so --resume with a larger limit continues it",
+        f"so {continued_by} with a larger limit continues it",
     )
     p.add_argument(
         "--warmup",
@@ -96,7 +98,7 @@ def _sampling_arguments(p, *, discover_by_default: bool = False):
         action=argparse.BooleanOptionalAction,
         default=discover_by_default,
         help="run discovery on the data first and sample the configured model plus the physics effects it names "
-        "(report in <out>/<label>/discovery/; see docs/discovery.md); --no-discover samples the configured model "
+        "(report in the result folder's discovery/; see docs/discovery.md); --no-discover samples the configured model "
         f"(default: {'--discover' if discover_by_default else '--no-discover'})",
     )
 
@@ -149,6 +151,7 @@ def fit_command(args):
     from ..pipeline import infer
 
     options = _check_sampling(args)
+    _writable_folder(args.out, "--out")
     dataset = load(bundled.resolve_dataset(args.data))  # validate before anything is written
     stem = Path(dataset.source_path).stem if dataset.source_path else dataset.material.code
     target = Path(args.out) / (args.label if args.label is not None else stem)
@@ -208,6 +211,7 @@ fit_command.arguments = _fit_arguments
 def run(args):
     options = _check_sampling(args)
     fanout = _fanout_options(args)
+    _writable_folder(args.out, "--out")
     materials = tuple(m.upper() for m in args.materials)
     unknown = [m for m in materials if m not in bundled.MATERIALS]
     if unknown:
@@ -256,9 +260,15 @@ def _fanout_arguments(p, what: str) -> None:
 
 def _run_arguments(p):
     p.add_argument("--out", default="results", metavar="DIR", help="output directory (default: results)")
-    p.add_argument("--materials", nargs="+", default=list(bundled.MATERIALS), metavar="CODE", help="subset to run")
+    p.add_argument(
+        "--materials",
+        nargs="+",
+        default=list(bundled.MATERIALS),
+        metavar="CODE",
+        help=f"the materials to run (default: all eight, {' '.join(bundled.MATERIALS)})",
+    )
     _fanout_arguments(p, "materials")
-    _sampling_arguments(p, discover_by_default=True)
+    _sampling_arguments(p, discover_by_default=True, continued_by="the same command again")
 
 
 run.arguments = _run_arguments
@@ -268,6 +278,7 @@ run.arguments = _run_arguments
 def fit_many_command(args):
     options = _check_sampling(args)
     fanout = _fanout_options(args)
+    _writable_folder(args.out, "--out")
     paths = [bundled.resolve_dataset(d) for d in args.data]
     from ..batch import fit_many
 
@@ -288,7 +299,7 @@ def _fit_many_arguments(p):
         "--prior", metavar="FILE.toml", default=None, help="one prior file for all (default: each sidecar's material)"
     )
     _fanout_arguments(p, "datasets")
-    _sampling_arguments(p)
+    _sampling_arguments(p, continued_by="the same command again")
 
 
 fit_many_command.arguments = _fit_many_arguments

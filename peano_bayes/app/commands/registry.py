@@ -45,6 +45,8 @@ def command(name: str, help: str):
 def _writable_folder(path, option: str) -> Path:
     """``path`` as a folder a command may write into (existing, or creatable where its nearest existing parent is
     a writable folder); otherwise :class:`PeanoBayesInputError` naming ``option``, before any work is done."""
+    if not str(path).strip():
+        raise PeanoBayesInputError(f"{option}: an empty path; expected a folder (existing or new)")
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise PeanoBayesInputError(f"{option} {path}: a file; expected a folder (existing or new)")

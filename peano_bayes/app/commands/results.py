@@ -245,6 +245,13 @@ def discover_command(args):
     dataset = load(bundled.resolve_dataset(args.data))  # validate before anything is written
     split = discovery_data(dataset, specimen=args.specimen, tests=args.tests)
 
+    try:  # a prior the user named is checked before anything is said or run
+        whole_prior, no_prior = prior_of(dataset, args.prior), None
+    except PeanoBayesInputError as err:
+        if args.prior is not None:
+            raise
+        whole_prior, no_prior = None, err
+
     def say(line):
         print(line, flush=True)
 
@@ -253,13 +260,9 @@ def discover_command(args):
         "(the first fit compiles the model: a few minutes)"
     )
     start = None
-    try:
-        whole_prior = prior_of(dataset, args.prior)
-    except PeanoBayesInputError as err:
-        if args.prior is not None:
-            raise
+    if whole_prior is None:
         say(f"no prior for material {dataset.material.code}, so the base fit uses discovery's own multi-start "
-            f"search, not fit's least squares ({err}); --prior FILE.toml gives it one")  # fmt: skip
+            f"search, not fit's least squares ({no_prior}); --prior FILE.toml gives it one")  # fmt: skip
     else:
         say(f"base model {'+'.join(base)}: the inference least squares (fit's starts and solver) ...")
         fitted = base_least_squares(
@@ -309,7 +312,9 @@ def _discover_arguments(p):
         help="tests to use (default: all in the file; a 1 kHz step response is the costly one)",
     )
     p.add_argument("--max-effects", type=int, default=3, help="most effects to add (default: 3)")
-    p.add_argument("--seed", type=_seed, default=0, help="seed of the base fit's extra starts and the block tests")
+    p.add_argument(
+        "--seed", type=_seed, default=0, help="seed of the base fit's extra starts and the block tests (default: 0)"
+    )
 
 
 discover_command.arguments = _discover_arguments
