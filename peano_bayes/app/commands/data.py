@@ -4,6 +4,7 @@ virtual rig)."""
 from __future__ import annotations
 
 from ... import bundled
+from ...defaults import MAX_PRESSURE_KPA
 from ...errors import PeanoBayesInputError
 from .registry import _DATA_HELP, _pressure_kpa, _seed, _writable_folder, command
 
@@ -28,7 +29,7 @@ demo.arguments = lambda p: p.add_argument(
     nargs="+",
     default=[30, 100, 200, 300, 500],
     metavar="P",
-    help="pressures to evaluate [kPa] (default: 30 100 200 300 500)",
+    help=f"pressures to evaluate [kPa], each above 0 and at most {MAX_PRESSURE_KPA:g} (default: 30 100 200 300 500)",
 )
 
 
@@ -159,8 +160,12 @@ def _simulate_arguments(p):
         help="switch on an effect by its name in the effect registry (repeatable; an unknown name lists them)",
     )
     p.add_argument("--drift", action="store_true", help="add a slow linear drift to the force sensor")
-    p.add_argument("--specimens", type=int, default=2, help="specimens per material (default: 2, as in the paper)")
-    p.add_argument("--repeats", type=int, default=3, help="repeats of each test (default: 3, as in the paper)")
+    p.add_argument(
+        "--specimens", type=int, default=2, help="specimens per material, 1 to 26 (default: 2, as in the paper)"
+    )
+    p.add_argument(
+        "--repeats", type=int, default=3, help="repeats of each test, 1 to 100 (default: 3, as in the paper)"
+    )
     p.add_argument("--force", action="store_true", help="replace an existing dataset at --out")
 
 

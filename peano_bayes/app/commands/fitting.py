@@ -43,7 +43,10 @@ def _sampling_arguments(p, *, discover_by_default: bool = False, continued_by: s
         "--starts", type=int, default=DEFAULT_STARTS, help=f"least-squares starts (default: {DEFAULT_STARTS})"
     )
     p.add_argument(
-        "--walkers", type=int, default=None, help="emcee walkers per ensemble (default: max(32, 2 x parameters + 2))"
+        "--walkers",
+        type=int,
+        default=None,
+        help="emcee walkers per ensemble, at least 2 x the sampled parameters (default: max(32, 2 x parameters + 2))",
     )
     p.add_argument(
         "--ensembles",

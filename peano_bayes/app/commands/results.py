@@ -44,7 +44,12 @@ def prior_command(args):
 
 
 def _prior_arguments(p):
-    p.add_argument("action", choices=("new",), help="new: write a starting prior that extends a bundled one")
+    p.add_argument(
+        "action",
+        choices=("new",),
+        metavar="new",
+        help="write a starting prior that extends a bundled material's prior or another prior file",
+    )
     p.add_argument(
         "--like",
         required=True,
