@@ -54,6 +54,23 @@ def test_json_output_is_the_only_thing_on_stdout(tmp_path, capsys, monkeypatch):
     assert "TP (60 um LDPE) - valid" in captured.err  # the human summary went to stderr
 
 
+def test_check_warns_of_pressures_past_what_the_answers_are_offered_for(tmp_path, capsys):
+    """Valid data up to the format's 2000 kPa pass ``check``; above the 1000 kPa to which metrics, recommend and
+    demo predict, ``check`` says so (stderr, and ``warnings`` under --json)."""
+    valid = Path(__file__).parent / "malformed" / "valid.csv"
+    lines = valid.read_text().splitlines()
+    lines[1] = lines[1].replace(",200.0,", ",1500.0,")
+    assert lines[1].split(",")[4] == "1500.0"
+    (tmp_path / "high.csv").write_text("\n".join(lines) + "\n")
+    (tmp_path / "high.toml").write_text(valid.with_suffix(".toml").read_text())
+    assert main(["check", str(tmp_path / "high.csv"), "--json"]) == 0
+    captured = capsys.readouterr()
+    (warning,) = json.loads(captured.out)["warnings"]
+    assert "pressures reach 1500 kPa, above the 1000 kPa" in warning and f"WARNING: {warning}" in captured.err
+    assert main(["check", "TP", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["warnings"] == []
+
+
 def test_quiet_prints_nothing_on_success(capsys):
     assert main(["check", "TP", "--quiet"]) == 0
     assert capsys.readouterr().out == ""

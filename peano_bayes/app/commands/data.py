@@ -3,6 +3,8 @@ virtual rig)."""
 
 from __future__ import annotations
 
+import sys
+
 from ... import bundled
 from ...defaults import MAX_PRESSURE_KPA
 from ...errors import PeanoBayesInputError
@@ -65,6 +67,16 @@ def check(args):
             f"  {test:<10} {t['runs']:3d} run{'s' if t['runs'] != 1 else ' '} {t['samples']:8d} samples   "
             f"time {t['time_s'][0]:g} to {t['time_s'][1]:g} s"
         )
+    warnings = []
+    highest_kpa = max(float(max(r.pressure_pa)) for r in dataset.runs) / 1e3
+    if highest_kpa > MAX_PRESSURE_KPA:  # valid data, but past what the answers are offered for
+        warnings.append(
+            f"pressures reach {highest_kpa:g} kPa, above the {MAX_PRESSURE_KPA:g} kPa to which metrics "
+            "(--pressure-kpa), recommend and demo predict; a fit there extrapolates the bundled priors, which rest "
+            "on tests to 200 kPa"
+        )
+    for warning in warnings:
+        print(f"peano-bayes check: WARNING: {warning}", file=sys.stderr)
     return {
         "file": str(dataset.source_path),
         "valid": True,
@@ -85,6 +97,7 @@ def check(args):
         "provenance": dict(dataset.provenance),
         "specimens": list(dataset.specimens),
         "tests": tests,
+        "warnings": warnings,
     }
 
 
