@@ -352,6 +352,29 @@ def test_output_folders_are_checked_before_any_work(tmp_path, capsys):
     assert "given more than once" in capsys.readouterr().err
 
 
+def test_a_fan_out_that_fails_before_any_result_leaves_no_folder(tmp_path, monkeypatch, capsys):
+    """``run`` and ``fit-many`` stopped before any result (here: a scheduler that cannot be reached, after the
+    run log was opened) remove the output folder they created; one that existed before is kept."""
+    import peano_bayes.app.batch as batch
+    from peano_bayes.errors import PeanoBayesError
+
+    def unreachable(out):
+        Path(out).mkdir(parents=True, exist_ok=True)
+        batch.RunLog(Path(out) / "run.log", None)("started")
+        raise PeanoBayesError("Timed out trying to connect to tcp://127.0.0.1:1")
+
+    monkeypatch.setattr(batch, "run_bundled", lambda out, **kw: unreachable(out))
+    monkeypatch.setattr(batch, "fit_many", lambda paths, out, **kw: unreachable(out))
+    data = str(bundled.dataset_path("TP"))
+    for argv in (["run", "--materials", "TP"], ["fit-many", data]):
+        out = tmp_path / argv[0]
+        assert main([*argv, "--out", str(out)]) == 1
+        assert "failed: Timed out trying to connect" in capsys.readouterr().err and not out.exists(), argv
+        out.mkdir()  # a folder the user already had stays, run log and all
+        assert main([*argv, "--out", str(out)]) == 1
+        assert (out / "run.log").exists()
+
+
 def test_the_main_job_runs_discovery_first_unless_told_not_to(tmp_path, monkeypatch):
     """``run`` samples the model discovery chooses for each material by default (``--no-discover``: the configured
     model); ``fit-many``, like ``fit``, only with ``--discover``."""

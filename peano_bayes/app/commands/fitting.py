@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
+import shutil
 import sys
 from pathlib import Path
 
@@ -224,8 +226,24 @@ def run(args):
         raise PeanoBayesInputError(f"--materials: {', '.join(repeated)} given more than once; expected each code once")
     from ..batch import run_bundled
 
-    summaries = run_bundled(args.out, materials=materials, **fanout, **options)
+    with _no_leftover_folder(args.out):
+        summaries = run_bundled(args.out, materials=materials, **fanout, **options)
     return _many_report("run", args.out, summaries, "materials")
+
+
+@contextlib.contextmanager
+def _no_leftover_folder(out):
+    """Remove ``out`` if this command created it and stops with nothing in it but its ``run.log`` (a Dask
+    scheduler that cannot be reached, an input refused by a worker): a failed command leaves nothing
+    half-written. A folder that existed before, or holds any result, is kept."""
+    out = Path(out)
+    existed = out.exists()
+    try:
+        yield
+    except BaseException:
+        if not existed and out.is_dir() and {p.name for p in out.iterdir()} <= {"run.log"}:
+            shutil.rmtree(out, ignore_errors=True)
+        raise
 
 
 def _fanout_options(args) -> dict:
@@ -285,7 +303,8 @@ def fit_many_command(args):
     paths = [bundled.resolve_dataset(d) for d in args.data]
     from ..batch import fit_many
 
-    summaries = fit_many(paths, args.out, prior=args.prior, **fanout, **options)
+    with _no_leftover_folder(args.out):
+        summaries = fit_many(paths, args.out, prior=args.prior, **fanout, **options)
     return _many_report("fit-many", args.out, summaries, "datasets")
 
 
