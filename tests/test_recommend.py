@@ -90,6 +90,8 @@ def test_bad_candidates_are_refused(tmp_path):
     bad_dir.write_text(f"[requirement]\n{GOOD}[results]\ndir = 5\n")
     with pytest.raises(PeanoBayesInputError, match=r"dir.toml \[results\] dir: expected a folder path"):
         load_spec(bad_dir)
+    with pytest.raises(PeanoBayesInputError, match=r"none.toml: no such spec file; expected a design spec TOML"):
+        load_spec(tmp_path / "none.toml")
 
 
 @pytest.fixture(scope="module")

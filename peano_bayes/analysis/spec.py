@@ -105,7 +105,10 @@ def load_spec(path: str | Path) -> Spec:
     try:
         raw = tomllib.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
-        raise PeanoBayesInputError(f"{path}: no such spec file") from None
+        raise PeanoBayesInputError(
+            f"{path}: no such spec file; expected a design spec TOML ([requirement], [candidates], [results]; "
+            "examples in the repository's experiments/specs/)"
+        ) from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
         raise PeanoBayesInputError(f"{path}: not valid TOML ({err})") from None
     _unknown(raw, _SECTIONS, str(path))

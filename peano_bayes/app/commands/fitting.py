@@ -194,10 +194,10 @@ def _fit_arguments(p):
     p.add_argument("--out", required=True, metavar="DIR", help="output directory (results go to DIR/LABEL/)")
     p.add_argument(
         "--prior",
-        metavar="FILE.toml",
+        metavar="FILE.toml|CODE",
         default=None,
-        help="prior file (may 'extends' a bundled one; 'peano-bayes prior new' writes a start); "
-        "default: the bundled prior of the sidecar's material code",
+        help="prior file (may 'extends' a bundled one; 'peano-bayes prior new' writes a start) or a bundled "
+        "material code; default: the bundled prior of the sidecar's material code",
     )
     p.add_argument(
         "--label", metavar="NAME", default=None, help="name of the result folder (default: the data file's stem)"
