@@ -1,9 +1,9 @@
-"""The package's rooms import only downwards, in the order docs/architecture.md lists them.
+"""The package's rooms import only from rooms listed before them in docs/architecture.md.
 
 docs/architecture.md draws ``peano_bayes/`` as a tree of rooms (``physics/``, ``effects.py``, ``data/``, ...,
 ``app/``) and promises that a room imports only from rooms listed before it. This reads that order from the
 document itself and every import of every module (``ast``: module-level and function-level imports alike,
-relative ones resolved), and fails on an import that points up, so that the picture a newcomer reads stays the
+relative ones resolved), and fails on an import of a room listed later, so that the picture a newcomer reads stays the
 code's. Top-level infrastructure outside the tree (``errors.py``, ``defaults.py``, ...) may be imported by any
 room and is not checked; the package's ``__init__.py`` re-exports and is not a room.
 """
@@ -60,7 +60,7 @@ def test_the_documented_rooms_are_the_packages_folders_and_registry():
     assert all((PACKAGE / r).is_dir() or (PACKAGE / f"{r}.py").is_file() for r in rooms)
 
 
-def test_every_import_points_down_the_documented_order():
+def test_every_room_imports_only_rooms_listed_before_it():
     rank = {room: i for i, room in enumerate(documented_rooms())}
     upward = []
     for path in sorted(PACKAGE.rglob("*.py")):
@@ -71,7 +71,7 @@ def test_every_import_points_down_the_documented_order():
             room = room_of(target)
             if room in rank and rank[room] > rank[source]:
                 upward.append(f"{path.relative_to(ROOT)} ({source}) imports {target} ({room})")
-    assert not upward, "imports pointing up the order of docs/architecture.md:\n" + "\n".join(upward)
+    assert not upward, "imports of rooms listed later in docs/architecture.md:\n" + "\n".join(upward)
 
 
 def test_the_import_reader_resolves_relative_imports():
