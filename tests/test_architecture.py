@@ -3,9 +3,9 @@
 docs/architecture.md draws ``peano_bayes/`` as a tree of rooms (``physics/``, ``effects.py``, ``data/``, ...,
 ``app/``) and promises that a room imports only from rooms listed before it. This reads that order from the
 document itself and every import of every module (``ast``: module-level and function-level imports alike,
-relative ones resolved), and fails on an import of a room listed later, so that the picture a newcomer reads stays the
-code's. Top-level infrastructure outside the tree (``errors.py``, ``defaults.py``, ...) may be imported by any
-room and is not checked; the package's ``__init__.py`` re-exports and is not a room.
+relative ones resolved), and fails on an import of a room listed later, so that the picture a newcomer reads
+stays the code's. Top-level infrastructure outside the tree (``errors.py``, ``defaults.py``, ...) may be
+imported by any room and is not checked; the package's ``__init__.py`` re-exports and is not a room.
 """
 
 from __future__ import annotations
@@ -62,7 +62,7 @@ def test_the_documented_rooms_are_the_packages_folders_and_registry():
 
 def test_every_room_imports_only_rooms_listed_before_it():
     rank = {room: i for i, room in enumerate(documented_rooms())}
-    upward = []
+    against = []
     for path in sorted(PACKAGE.rglob("*.py")):
         source = room_of(".".join(path.relative_to(ROOT).with_suffix("").parts))
         if source not in rank:  # infrastructure and the package's own __init__
@@ -70,8 +70,8 @@ def test_every_room_imports_only_rooms_listed_before_it():
         for target in sorted(imported_modules(path)):
             room = room_of(target)
             if room in rank and rank[room] > rank[source]:
-                upward.append(f"{path.relative_to(ROOT)} ({source}) imports {target} ({room})")
-    assert not upward, "imports of rooms listed later in docs/architecture.md:\n" + "\n".join(upward)
+                against.append(f"{path.relative_to(ROOT)} ({source}) imports {target} ({room})")
+    assert not against, "imports of rooms listed later in docs/architecture.md:\n" + "\n".join(against)
 
 
 def test_the_import_reader_resolves_relative_imports():
