@@ -205,7 +205,7 @@ def test_prior_new_like_a_prior_file_of_ones_own_extends_it_by_its_relative_path
         (["demo", "--pressures-kpa", "-5"], "--pressures-kpa must be a pressure in kPa"),
         (["demo", "--pressures-kpa", "nan"], "--pressures-kpa must be a pressure in kPa"),
         (["metrics", "{tmp}", "--pressure-kpa", "200000"], "at most 1000"),
-        (["discover", "TP", "--out", "{tmp}/d", "--base", ""], "--base: expected comma-separated effect names"),
+        (["discover", "TP", "--out", "{tmp}/d", "--base", ""], "--base: expected effect names"),
         (["recommend", "--spec", "{tmp}/spec.toml", "--mount-compliance", "5"], "from 0 to 0.1"),
     ],
 )

@@ -447,6 +447,10 @@ def test_discover_cli_bad_input_exits_2(tmp_path, capsys):
     assert main(["discover", str(tmp_path / "missing.csv"), "--out", str(tmp_path / "o"), "--base", "hysterisis"]) == 2
     err = capsys.readouterr().err
     assert "did you mean 'hysteresis'" in err
+    for base in (["tensile_stiffness", "hysterisis"], ["tensile_stiffness,", "bending_stiffness,hysterisis"]):
+        # a list option takes spaces as the other list options do, and commas as before: the typo is reached
+        assert main(["discover", str(tmp_path / "missing.csv"), "--out", str(tmp_path / "o"), "--base", *base]) == 2
+        assert "--base: unknown effect 'hysterisis'" in capsys.readouterr().err
     assert main(["discover", "TP", "--out", str(tmp_path / "o"), "--prior", str(tmp_path / "none.toml")]) == 2
     captured = capsys.readouterr()
     assert "none.toml" in captured.err and "held-out runs" not in captured.out  # refused before it starts

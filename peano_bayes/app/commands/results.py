@@ -237,9 +237,9 @@ def discover_command(args):
     from ...effects import check_effects, flexible_terms
     from ..pipeline import prior_of
 
-    named = None if args.base is None else [name.strip() for name in args.base.split(",") if name.strip()]
+    named = None if args.base is None else [n.strip() for item in args.base for n in item.split(",") if n.strip()]
     if named == []:
-        raise PeanoBayesInputError(f"--base: expected comma-separated effect names, got {args.base!r}")
+        raise PeanoBayesInputError(f"--base: expected effect names (space- or comma-separated), got {args.base!r}")
     try:
         base = check_effects(named) if named is not None else DEFAULT_BASE
     except PeanoBayesInputError as err:
@@ -297,9 +297,12 @@ def _discover_arguments(p):
     p.add_argument("--out", required=True, metavar="DIR", help="output directory for report.json, report.md, figures/")
     p.add_argument(
         "--base",
-        metavar="EFFECTS",
+        nargs="+",
+        action="extend",
+        metavar="EFFECT",
         default=None,
-        help="comma-separated effects already in the base model (default: tensile_stiffness,bending_stiffness)",
+        help="effects already in the base model, space- or comma-separated like the other list options (default: "
+        "tensile_stiffness bending_stiffness)",
     )
     p.add_argument(
         "--prior",
