@@ -347,6 +347,9 @@ def test_output_folders_are_checked_before_any_work(tmp_path, capsys):
     assert f"--out {taken}: a file; expected a folder" in capsys.readouterr().err
     assert main(["simulate", "--material", "TP", "--out", str(taken / "sim.csv")]) == 2
     assert "--out" in capsys.readouterr().err and taken.read_text() == "a file"
+    assert main(["simulate", "--material", "TP", "--out", str(tmp_path / "sim.txt")]) == 2  # not sim.txt.csv
+    assert f"give {tmp_path / 'sim.csv'} (or {tmp_path / 'sim.txt'}.csv" in capsys.readouterr().err
+    assert not list(tmp_path.glob("sim*"))
     (tmp_path / "TP").mkdir()
     assert main(["rank", str(tmp_path / "TP"), str(tmp_path / "TP")]) == 2
     assert "given more than once" in capsys.readouterr().err

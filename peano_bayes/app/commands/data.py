@@ -4,6 +4,7 @@ virtual rig)."""
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 from ... import bundled
 from ...defaults import MAX_PRESSURE_KPA
@@ -110,6 +111,12 @@ def simulate(args):
     from ...rig import read_parameter_file, simulate_dataset
 
     params, config = read_parameter_file(args.params) if args.params else ({}, None)
+    suffix = Path(args.out).suffix
+    if suffix.lower() not in ("", ".csv", ".toml") and suffix[1:].isalpha():  # x.txt, not a stem like FC_1.5mm
+        raise PeanoBayesInputError(
+            f"--out: {args.out} ends in {suffix!r}; a dataset is written as PATH.csv with its PATH.toml sidecar: give "
+            f"{Path(args.out).with_suffix('.csv')} (or {args.out}.csv to keep the dot in the name)"
+        )
     try:
         csv_path, toml_path = dataset_paths(args.out)
     except PeanoBayesInputError as err:
