@@ -5,6 +5,7 @@ and equal a serial run with the same seeds."""
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -70,6 +71,25 @@ def test_scheduler_specifications():
             pass
     with make_executor(None, 1) as (executor, info):
         assert executor is None and info.kind == "serial"
+
+
+def test_a_scheduler_nothing_listens_at_is_reported_before_dask_tries(monkeypatch):
+    """Dask retries a refused connection for its 30 s connect timeout; one probe says so before a client exists."""
+    distributed = pytest.importorskip("distributed")
+
+    def no_client(*args, **kwargs):
+        raise AssertionError("a Dask client was made for a scheduler that cannot be reached")
+
+    monkeypatch.setattr(distributed, "Client", no_client)
+    with socket.socket() as s:  # a port that was free a moment ago: nothing listens there
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    with pytest.raises(PeanoBayesError, match=f"cannot reach the Dask scheduler at tcp://127.0.0.1:{port}"):
+        with make_executor(f"tcp://127.0.0.1:{port}"):
+            pass
+    with pytest.raises(PeanoBayesInputError, match="expected tcp://HOST:PORT"):
+        with make_executor("tcp://head"):
+            pass
 
 
 def test_fresh_workers_run_every_unit_in_a_new_process():

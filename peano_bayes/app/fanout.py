@@ -43,12 +43,15 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..errors import PeanoBayesInputError
+from ..errors import PeanoBayesError, PeanoBayesInputError
 
 #: Seconds between refreshes of the progress bar's running count while no unit finishes.
 POLL_S = 10.0
 #: The address schemes of Dask's communication layer (``distributed.comm``): a scheduler address uses one.
 DASK_SCHEMES = ("tcp", "tls", "inproc", "ucx", "ws", "wss")
+#: Seconds a TCP connection to a named scheduler may take before it counts as unreachable (Dask itself waits
+#: ``distributed.comm.timeouts.connect``, 30 s, and retries a refused connection all that time).
+CONNECT_PROBE_S = 5.0
 #: Environment variable that names the scheduler when no ``--scheduler`` is given.
 SCHEDULER_ENV = "PEANO_BAYES_SCHEDULER"
 #: XLA flags of a Dask worker process: one compute thread, so a node's N workers use N cores.
@@ -387,8 +390,28 @@ def make_executor(
         ):
             yield client.get_executor(pure=False), ExecutorInfo("dask-local", detail, cluster.scheduler_address)
         return
+    _check_reachable(detail)
     with distributed.Client(detail) as client:
         yield client.get_executor(pure=False), ExecutorInfo("dask", None, detail)
+
+
+def _check_reachable(address: str, timeout_s: float = CONNECT_PROBE_S) -> None:
+    """Open and close one TCP connection to the scheduler at a ``tcp://`` or ``tls://`` ``address``, so that a
+    scheduler that is not running (connection refused) or a host that does not answer is reported at once, not
+    after Dask's 30 s of retries. Other schemes are left to Dask."""
+    scheme, _, rest = address.partition("://")
+    if scheme not in ("tcp", "tls"):
+        return
+    host, _, port = rest.split("/")[0].rpartition(":")
+    try:
+        socket.create_connection((host.strip("[]") or "localhost", int(port)), timeout=timeout_s).close()
+    except ValueError:
+        raise PeanoBayesInputError(f"scheduler {address!r}: expected {scheme}://HOST:PORT") from None
+    except OSError as err:
+        raise PeanoBayesError(
+            f"cannot reach the Dask scheduler at {address} ({err.strerror or err}); is it running, and is the "
+            "address right?"
+        ) from None
 
 
 def provenance(info: ExecutorInfo, outcomes: Sequence[Outcome], **extra) -> dict:
