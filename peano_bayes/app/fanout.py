@@ -356,17 +356,18 @@ def make_executor(
     - ``tcp://HOST:PORT``: the Dask cluster of that scheduler (its workers must have peano_bayes installed and
       see the output folder).
 
-    ``fresh_workers`` (local worker processes only): every unit runs in a new worker process. A worker keeps
-    every program it compiled for as long as it lives, so a long fan-out of units with different models grows
-    without bound (the discovery benchmark's two workers reached 22 GB of the machine's 24 in 2.5 h); a new
-    worker reads its programs from the persistent compilation cache. One unit per worker, not K: with more than
+    ``fresh_workers`` (local worker processes only): every unit runs in a new worker process, with one job too
+    (not here). A worker keeps every program it compiled for as long as it lives, so a long fan-out of units
+    with different models grows without bound (the discovery benchmark's two workers reached 22 GB of the
+    machine's 24 in 2.5 h; one job run here, 20.8 GB in 1 h 40 min); a new worker reads its programs from the
+    persistent compilation cache. One unit per worker, not K: with more than
     one, Python 3.11's pool stops replacing the workers that leave and waits for ever (CPython gh-115634).
     """
     if jobs < 1:
         raise PeanoBayesInputError(f"jobs must be >= 1, got {jobs}")
     kind, detail = parse_scheduler(scheduler if scheduler is not None else os.environ.get(SCHEDULER_ENV))
     if kind == "processes":
-        if jobs == 1:
+        if jobs == 1 and not fresh_workers:
             yield None, ExecutorInfo("serial", 1)
             return
         _settle_arviz_stamp()
