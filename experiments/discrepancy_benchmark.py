@@ -61,9 +61,10 @@ from peano_bayes.validation.discovery_benchmark import (
 
 HERE = Path(__file__).resolve().parent
 # runs a local worker serves before a new one replaces it: a new worker spent about 90 s of a run tracing
-# programs again (runs took 130 s in a new worker, 40-60 s in one that had run others), and each run left
-# about 0.4 GB of compiled programs in its worker (52 runs: 20.8 GB of the machine's 24)
-RUNS_PER_WORKER = 10
+# programs again (runs took 130 s in a new worker, 40-60 s in one that had run others), and each run leaves its
+# compiled programs in the worker (52 runs in one process: 20.8 GB of the machine's 24; one worker held 10.9 GB
+# after 5 runs that included both other-physics nulls, so 6 keeps a worker and a fit beside it in the memory)
+RUNS_PER_WORKER = 6
 TWO_EFFECTS = ("hysteresis", "flow_restriction")
 
 
