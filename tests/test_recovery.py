@@ -52,6 +52,33 @@ def test_least_squares_continues_in_rounds_until_the_best_start_converges(recove
         fit(posterior.observations, prior, max_rounds=0, **kwargs)
 
 
+def test_seeds_and_held_values_are_arguments_of_the_least_squares_program_not_constants(recovered):
+    """Two seeds (the prior term's spread is drawn with the seed), two sets of held parameter values and two sets
+    of noise scales give one program text, so the persistent compilation cache serves the second fit (SBC
+    replicates, benchmark runs, datasets with drawn constants); the numbers themselves do differ."""
+    import jax
+
+    from peano_bayes.inference.fit import DEFAULT_NOISE, _residuals_and_solver_ok, prior_spread, program_arguments
+    from peano_bayes.inference.prior_files import prior_for
+
+    posterior, _, _, _, fitted = recovered
+    prior = prior_for("TP").select(list(fitted.names))
+    evaluate = _residuals_and_solver_ok(posterior.observations, prior, posterior.config)
+    program = jax.jit(lambda u, args: evaluate(u, args)[0])
+    u = prior.median_unconstrained()
+
+    def arguments(seed, scale):
+        fixed = {k: scale * float(v) for k, v in posterior.fixed.items()}
+        noise = {k: scale * v for k, v in DEFAULT_NOISE.items()}
+        return program_arguments(posterior.observations.groups, prior_spread(prior, seed), fixed, noise)
+
+    first, second = arguments(0, 1.0), arguments(1, 1.1)
+    assert not np.allclose(first[1], second[1]) and posterior.fixed
+    assert program.lower(u, first).as_text() == program.lower(u, second).as_text()
+    # and the arguments are used: the residuals differ
+    assert not np.allclose(program(u, first), program(u, second))
+
+
 @pytest.mark.slow
 def test_fit_residuals_match_the_sensor_noise(recovered):
     """With the driving inputs denoised (likelihood.prepare), the residuals are sensor noise; with the raw

@@ -195,15 +195,18 @@ def prior_spread(prior: Prior, seed: int) -> jnp.ndarray:
     return jnp.asarray(np.maximum(np.std(draws, axis=0), 1e-3))
 
 
-def _residuals_and_solver_ok(observations: Observations, prior: Prior, config: ModelConfig, noise, spread, fixed):
-    """``evaluate(u, groups) -> (residuals (n,), solver_ok, predictions)``: the weighted residuals of the run
-    ``groups`` (those of ``observations`` or others of the same shapes), whether every simulation met its
-    solver tolerance (:data:`SOLVER_TOLERANCE`) and each group's prediction (r, m), from one simulation. The
-    groups are an argument, not a constant of the compiled program, so materials whose data shapes and prior
-    agree share one program through the persistent compilation cache."""
+def _residuals_and_solver_ok(observations: Observations, prior: Prior, config: ModelConfig):
+    """``evaluate(u, args) -> (residuals (n,), solver_ok, predictions)`` with ``args = (groups, spread, fixed,
+    noise)`` (:func:`program_arguments`): the weighted residuals of the run ``groups`` (those of ``observations``
+    or others of the same shapes), whether every simulation met its solver tolerance (:data:`SOLVER_TOLERANCE`)
+    and each group's prediction (r, m), from one simulation. The groups, the prior term's ``spread`` (d,), the
+    ``fixed`` parameters and the ``noise`` scales are arguments, not constants of the compiled program, so fits
+    whose data shapes, prior and configuration agree (materials, seeds, drawn constants) share one program
+    through the persistent compilation cache."""
     centre = prior.median_unconstrained()
 
-    def evaluate(u, groups):
+    def evaluate(u, args):
+        groups, spread, fixed, noise = args
         params = {**fixed, **prior.from_unconstrained(u)}
         parts, ok, predictions = [], jnp.asarray(True), []
         for group in groups:
@@ -220,10 +223,23 @@ def _residuals_and_solver_ok(observations: Observations, prior: Prior, config: M
     return evaluate
 
 
+def program_arguments(groups, spread, fixed: dict, noise: dict) -> tuple:
+    """``(groups, spread, fixed, noise)`` as the arguments of :func:`_residuals_and_solver_ok`'s ``evaluate``: the
+    numbers as float64 arrays (traced, so they do not enter the compiled program as constants)."""
+    as_array = lambda v: jnp.asarray(v, dtype=jnp.float64)  # noqa: E731
+    return (
+        groups,
+        as_array(spread),
+        {k: as_array(v) for k, v in fixed.items()},
+        {k: as_array(v) for k, v in noise.items()},
+    )
+
+
 def residual_function(observations: Observations, prior: Prior, config: ModelConfig, noise, spread, fixed):
     """``fn(u, args) -> residuals (n,)`` for optimistix, over the parameters of ``prior`` (the rest ``fixed``)."""
-    evaluate = _residuals_and_solver_ok(observations, prior, config, noise, spread, fixed)
-    return lambda u, args: evaluate(u, observations.groups)[0]
+    evaluate = _residuals_and_solver_ok(observations, prior, config)
+    args = program_arguments(observations.groups, spread, fixed, noise)
+    return lambda u, _: evaluate(u, args)[0]
 
 
 @eqx.filter_jit
@@ -477,20 +493,19 @@ def fit(
     noise = {**DEFAULT_NOISE, **(noise or {})}
     fixed = {k: jnp.asarray(v) for k, v in {**config.nominal_parameters(), **(fixed or {})}.items()}
     fixed = {k: v for k, v in fixed.items() if k not in prior.names}
-    spread = prior_spread(prior, seed)
-    evaluate = _residuals_and_solver_ok(observations, prior, config, noise, spread, fixed)
-    fn = dense_jacobian(lambda u, groups: evaluate(u, groups)[0])
+    evaluate = _residuals_and_solver_ok(observations, prior, config)
+    fn = dense_jacobian(lambda u, args: evaluate(u, args)[0])
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
 
-    def one(u0, groups):
-        sol = optx.least_squares(fn, solver, u0, groups, max_steps=max_steps, throw=False)
-        r, solver_ok, predictions = evaluate(sol.value, groups)
+    def one(u0, args):
+        sol = optx.least_squares(fn, solver, u0, args, max_steps=max_steps, throw=False)
+        r, solver_ok, predictions = evaluate(sol.value, args)
         cost = 0.5 * jnp.sum(r**2)
         # A point where the physics solver misses its tolerance has likelihood zero (see likelihood.py).
         ok = jnp.isfinite(cost) & solver_ok
         # The end point's Jacobian and predictions come out of the same program: tracing the physics again
         # in programs of their own costs seconds, evaluating them for every start costs little.
-        jac = jax.jacfwd(fn)(sol.value, groups)
+        jac = jax.jacfwd(fn)(sol.value, args)
         return sol.value, ok, sol.result == optx.RESULTS.successful, jnp.where(ok, cost, jnp.inf), jac, predictions
 
     if max_rounds < 1:
@@ -498,7 +513,7 @@ def fit(
     if n_starts < 1:
         raise ValueError(f"n_starts must be >= 1, got {n_starts!r}")
     all_starts = np.vstack([np.asarray(prior.median_unconstrained())[None], prior.sample(seed, n_starts - 1)])
-    groups = observations.groups
+    args = program_arguments(observations.groups, prior_spread(prior, seed), fixed, noise)
     run = jax.jit(jax.vmap(one, in_axes=(0, None)))
     size = min(n_starts, START_BATCH)
     best = None  # (cost, u, jacobian, predictions, converged, rounds) of the best start so far
@@ -512,7 +527,7 @@ def fit(
         rounds = 0
         while rounds < max_rounds:
             rounds += 1
-            v, ok, conv, c, jacs, predictions = run(jnp.asarray(starts), groups)
+            v, ok, conv, c, jacs, predictions = run(jnp.asarray(starts), args)
             v, conv = np.asarray(v), np.asarray(conv)
             batch_failed |= ~np.asarray(ok)
             c = np.where(batch_failed, np.inf, np.asarray(c))
