@@ -20,6 +20,7 @@ ones, discovery's verdict and named effects (when recorded), and ``all_contained
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 import tomllib
@@ -68,13 +69,19 @@ def discovered(code: str, out: Path) -> tuple[list[str], set[str], dict]:
 
 
 def main(argv: list[str]) -> int:
-    discover_out = None
-    if argv[:1] == ["--discover"]:
-        if len(argv) != 2:
-            print("model_choice_bundled.py: error: --discover needs an output folder", file=sys.stderr)
-            return 2
-        discover_out, argv = Path(argv[1]), []
-    results = Path(argv[0]) if argv else None
+    parser = argparse.ArgumentParser(
+        description="Does the sampled model contain every generating element the fitted tests can see, on the "
+        "eight bundled files?"
+    )
+    source = parser.add_mutually_exclusive_group()
+    source.add_argument(
+        "results", nargs="?", type=Path, metavar="RESULTS", help="a main job's results (RESULTS/<code>/summary.json)"
+    )
+    source.add_argument(
+        "--discover", type=Path, metavar="OUT", help="run `run`'s model choice on each bundled file, reports into OUT"
+    )
+    args = parser.parse_args(argv)
+    discover_out, results = args.discover, args.results
     truth_text = resources.files("peano_bayes.bundled").joinpath("data/true_parameters.toml").read_text()
     truth = tomllib.loads(truth_text)
     out, all_contained = {}, True

@@ -99,6 +99,23 @@ def test_a_fit_says_which_asked_for_tests_the_file_lacks(own_muscle, tmp_path):
     assert "VM: the file has no blocking, stroke runs; fitting load_cycle only" in lines
 
 
+@pytest.mark.parametrize("sample_all", [False, True])
+def test_a_fit_says_which_shape_constants_it_holds(tmp_path, monkeypatch, sample_all):
+    """The log names the shape constants held at nominal (every interval is conditional on them) and how to
+    sample them; with ``--sample-all`` nothing is said (here the fit stops at its least squares, before any work)."""
+
+    def stop(*args, **kwargs):
+        raise RuntimeError("stopped before the least squares")
+
+    monkeypatch.setattr(pipeline, "least_squares", stop)
+    lines = []
+    with pytest.raises(RuntimeError, match="stopped before"):
+        pipeline.infer(load(bundled.dataset_path("TP")), tmp_path / "out", log=lines.append, sample_all=sample_all)
+    (line,) = [line for line in lines if "parameters sampled" in line]
+    held = "; shape constants held, not sampled: length_fraction = 0.8, bending_exponent = 6, extension_rate = 50"
+    assert (held in line and line.endswith("(--sample-all samples them)")) is not sample_all, line
+
+
 def test_fit_of_an_unknown_material_without_a_prior_names_the_option(own_muscle, tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["fit", str(own_muscle), "--out", str(out)]) == 2

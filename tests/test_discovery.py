@@ -462,17 +462,18 @@ def test_benchmark_runs_name_nothing_on_a_null_and_no_physics_for_drift():
     discover CLI test's data shapes so they reuse its compiled superset: with nothing hidden (seed 110) the verdict
     is ``none``; with only load-cell drift hidden (seed 110) no physics effect is named, and the run is scored
     right only if it found the drift and showed it in time (``unexplained`` with ``drift_shown``): a missed drift
-    is a miss. These are fixed-seed regression checks of the scoring path; the rates (recall, false positives,
-    with Wilson bounds over 40 seeds per case) are measured by experiments/discrepancy_benchmark.py. The
-    hysteresis case is judged strictly by the discover CLI test."""
+    is a miss (that scoring is tested on constructed reports). These are fixed-seed regression checks of the
+    scoring path; the rates (recall, false positives, with Wilson bounds over 40 seeds per case) are measured by
+    experiments/discrepancy_benchmark.py. The hysteresis case is judged strictly by the discover CLI test."""
     null = run_case(Case(), 110, {}, tests=LOAD_CYCLES)
     assert null["verdict"] == "none" and null["correct"] and not null["false_positive"], null["outcome"]
     assert null["base_start"] == "inference_least_squares"  # as `discover` runs it for a user
     assert null["withheld"] == []  # recorded: what had its own evidence but was not named for structure left
     drift = run_case(Case(drift=True), 110, {}, tests=LOAD_CYCLES)
     assert drift["verdict"] in ("none", "unexplained") and not drift["named"], drift["outcome"]
-    assert drift["correct"] == (drift["verdict"] == "unexplained" and drift["drift_shown"])
     assert not drift["false_positive"]
+    # Whether this run found the drift is a rate's business (the benchmark's); how a found or missed drift is
+    # scored is checked on constructed reports (test_a_drift_is_found_only_when_shown_in_time_and_a_missed_...).
 
 
 def test_harness_pressure_noise_follows_the_case():

@@ -63,6 +63,11 @@ def test_results_page_shows_population_new_specimen_and_weakly_informed_paramete
     assert "| tensile_ka_n_per_m | N/m | 500 | 480 to 520 | 450 to 560 | 0.99 | 1.002 | 3000 |" in page
     assert "**Posterior close to its prior** (contraction below 0.5): specimen_log_sd." in page
     assert "close to its prior" not in index_markdown([_summary(0.8)])
+    assert "Held, not sampled" not in page  # an old summary, or one that held nothing
+    held = index_markdown([{**_summary(0.8), "fixed": {"length_fraction": 0.8, "orifice_area_m2": 5e-06}}])
+    assert "**Held, not sampled** (every interval here is conditional on these values): length_fraction = 0.8, " in held
+    assert "orifice_area_m2 = 5e-06." in held and "The shape constants (length_fraction) are held" in held
+    assert "shape constants" not in index_markdown([{**_summary(0.8), "fixed": {"orifice_area_m2": 5e-06}}])
     assert "Timings: least squares 1.0 s," in page  # chosen without discovery
     timed = {**_summary(0.2), "timings_s": {**_summary(0.2)["timings_s"], "discovery_s": 107.54}}
     assert "Timings: discovery 107.5 s, least squares 1.0 s," in index_markdown([timed])

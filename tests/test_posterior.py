@@ -143,20 +143,30 @@ def test_denoised_inputs_bring_stroke_residuals_down_to_the_sensor_noise():
 
 def test_fit_quality_reads_a_two_specimen_posteriors_parameters(stroke_data):
     """The posterior mean's fit quality (what every fit reports) takes the specimen offsets of a hierarchy, a
-    mapping inside the parameters, and agrees with the prediction it is computed from."""
+    mapping inside the parameters, and agrees with the prediction it is computed from: the specimens' own
+    values (that prediction equals one made with each specimen's values passed directly, checked in
+    ``test_each_varying_parameter_has_its_own_specimen_offset``). The contrast moves the two specimens apart, so
+    a fit quality that dropped the offsets would differ."""
     from peano_bayes.inference.fit import fit_quality
 
     post = build_posterior(prepare(stroke_data), prior_for("TP"))
     theta = np.zeros(post.ndim)
     theta[: post.prior.ndim] = np.asarray(post.prior.median_unconstrained())
+    theta[post.names.index("specimen_contrast_tensile_ka_n_per_m_1")] = 0.3
     params = post.params(theta)
     assert isinstance(params["specimen_log_offset"], dict)
     quality = fit_quality(params, post.observations, post.config)
     group = post.observations.groups[0]
-    predicted, _ = predict(params, group, config=post.config, geometry=post.observations.geometry)
-    error = (np.asarray(group.observed) - np.asarray(predicted))[np.isfinite(group.observed)]
+
+    def rmse(p):
+        predicted, _ = predict(p, group, config=post.config, geometry=post.observations.geometry)
+        error = (np.asarray(group.observed) - np.asarray(predicted))[np.isfinite(group.observed)]
+        return float(np.sqrt(np.mean(error**2)))
+
     assert set(quality) == {"stroke"}
-    assert quality["stroke"]["rmse"] == pytest.approx(float(np.sqrt(np.mean(error**2))), rel=1e-9)
+    assert quality["stroke"]["rmse"] == pytest.approx(rmse(params), rel=1e-9)
+    without = {k: v for k, v in params.items() if k != "specimen_log_offset"}
+    assert rmse(without) != pytest.approx(quality["stroke"]["rmse"], rel=1e-6)  # far outside the check's 1e-9
 
 
 def test_excess_over_the_sensor_noise_measures_a_missing_offset_and_not_the_noise():

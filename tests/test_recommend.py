@@ -305,6 +305,39 @@ def test_the_operating_force_is_the_hand_solved_ideal_muscle_force_when_nothing_
     assert report["draws"] == {"TP": n} and report["margin"] == 0.05
 
 
+def test_with_every_parameter_draw_alike_the_force_interval_is_the_misfits_own_normal(tmp_path):
+    """The ideal muscle of the test above with one length fraction in every draw: the operating force has no
+    spread of its own, so with the blocking test's structured misfit of 2 N (excess RMSE) its 94 % interval is
+    that of a normal of sd 2 N, 2 x 1.881 x 2 = 7.52 N wide (within the sampling error of 4000 draws' HDI),
+    centred on the hand-solved force: the misfit is added once, at its own size."""
+    n = 4000
+    config = dict(bending=False, tensile=False, extension=False, mount=False, parallel_maxwell=0, series_kelvin=0,
+                  friction="none", threshold=False, flow="orifice", damping=False)  # fmt: skip
+    idata = az.from_dict(posterior={"length_fraction": np.full((1, n), 0.7), "orifice_area_m2": np.full((1, n), 5e-6)})
+    idata.posterior.attrs.update(material="TP", model_config=json.dumps(config), fixed_parameters="{}", converged=1)
+    (tmp_path / "TP").mkdir()
+    idata.to_netcdf(str(tmp_path / "TP" / "posterior.nc"))
+    summary = minimal_summary(
+        fit_quality_posterior_mean={"blocking": {"excess_rmse": 2.0}},
+        residual_correlation={"blocking": {"consistent_with_noise": False, "likelihood_lag1": None}},
+    )
+    (tmp_path / "TP" / "summary.json").write_text(json.dumps(summary))
+    requirement = "force_n = 10.0\ncontraction = 0.12\nmax_pressure_kpa = 30\n"
+    grid = "n_tubes = [4]\ntube_width_mm = [15]\ntube_length_mm = [49.5]\n"  # the result's own geometry
+    report = recommend(_spec(tmp_path, requirement, grid + f"[results]\nn_draws = {n}\n"), tmp_path, log=lambda m: None)
+    (c,) = report["candidates"]
+    low, high = 1e-6, math.pi / 2
+    for _ in range(200):
+        mid = 0.5 * (low + high)
+        low, high = (mid, high) if 1.0 - math.sin(mid) / mid < 0.12 else (low, mid)
+    theta = 0.5 * (low + high)
+    force = 30e3 * 15e-3 * (0.7 * 49.5e-3) * math.cos(theta) / theta
+    assert c["force_discrepancy_sd_n"] == pytest.approx(2.0, rel=1e-9)
+    assert c["force_interval_n"][1] - c["force_interval_n"][0] == pytest.approx(2 * 1.881 * 2.0, rel=0.06)
+    assert np.mean(c["force_interval_n"]) == pytest.approx(force, abs=0.15)
+    assert c["force_median_n"] == pytest.approx(force, abs=0.1)
+
+
 def test_the_top_candidate_is_recommended_only_when_it_clears_the_next_by_two_standard_errors():
     from peano_bayes.analysis.recommend import recommended
 

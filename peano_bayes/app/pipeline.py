@@ -283,10 +283,12 @@ def infer(
         log(f"{code}: some runs carry an added mount compliance, so the model includes the mount")
         choice = dataclasses.replace(choice, config=plan.config)
     config, prior, observations, posterior, n_walkers = plan
+    held = [f"{name} = {posterior.fixed[name]:g}" for name in DEFAULT_HELD if name in posterior.fixed]
     out.mkdir(parents=True, exist_ok=True)
     log(
         f"{code}: {observations.n_bins} bins from {len(dataset.runs)} runs ({', '.join(dataset.tests)}); "
         f"{posterior.ndim} parameters sampled"
+        + (f"; shape constants held, not sampled: {', '.join(held)} (--sample-all samples them)" if held else "")
     )
     if fitted is None:
         fitted = fit_plan(plan)

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from ..formatting import format_number
 from ..inference.fit import structured_tests
+from ..inference.posterior import DEFAULT_HELD
 from ..inference.results import (
     RIDGE_CORRELATION,
 )
@@ -17,6 +18,25 @@ DISCOVERY_FOLDER = "discovery"
 
 #: Posterior contraction below which ``index.md`` says a parameter's posterior is close to its prior.
 WEAKLY_INFORMED = 0.5
+
+
+def held_lines(fixed: dict) -> list[str]:
+    """``index.md`` lines naming the model parameters a fit held instead of sampling (``summary.json``'s
+    ``fixed``, SI units as in their names): every interval of the result is conditional on these values. The
+    shape constants of :data:`~peano_bayes.inference.posterior.DEFAULT_HELD` are held at nominal unless
+    ``--sample-all``; where a muscle's differ, intervals that hold them are too narrow and can miss."""
+    if not fixed:
+        return []
+    values = ", ".join(f"{name} = {format_number(value)}" for name, value in fixed.items())
+    line = f"**Held, not sampled** (every interval here is conditional on these values): {values}."
+    shape = [name for name in DEFAULT_HELD if name in fixed]
+    if shape:
+        line += (
+            f" The shape constants ({', '.join(shape)}) are held at nominal by default: on a muscle whose "
+            "constants differ, intervals that hold them are too narrow and can miss the truth; `--sample-all` "
+            "samples them, at a far higher cost."
+        )
+    return ["", line]
 
 
 def ridge_lines(ridges: list[dict]) -> list[str]:
@@ -192,6 +212,7 @@ def index_markdown(
                 "The fitted tests say little about these; their intervals are mostly the prior's.",
             ]
         lines += ridge_lines(s.get("ridges", []))
+        lines += held_lines(s.get("fixed", {}))
         correlation = s.get("residual_correlation", {})
         lines += [
             "",
