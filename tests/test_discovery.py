@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from peano_bayes.app.cli import main, strict_json
+from peano_bayes.app.cli import build_parser, main, parse, strict_json
 from peano_bayes.data import save
 from peano_bayes.discovery import LIBRARY, discovery_data
 from peano_bayes.discovery.data import DISCOVERY_BIN_SIZES, DISCOVERY_EVERY_SAMPLE
@@ -447,10 +447,14 @@ def test_discover_cli_bad_input_exits_2(tmp_path, capsys):
     assert main(["discover", str(tmp_path / "missing.csv"), "--out", str(tmp_path / "o"), "--base", "hysterisis"]) == 2
     err = capsys.readouterr().err
     assert "did you mean 'hysteresis'" in err
-    for base in (["tensile_stiffness", "hysterisis"], ["tensile_stiffness,", "bending_stiffness,hysterisis"]):
+    for base in (["hysterisis", "tensile_stiffness"], ["tensile_stiffness,", "hysterisis,bending_stiffness"]):
         # a list option takes spaces as the other list options do, and commas as before: the typo is reached
         assert main(["discover", str(tmp_path / "missing.csv"), "--out", str(tmp_path / "o"), "--base", *base]) == 2
         assert "--base: unknown effect 'hysterisis'" in capsys.readouterr().err
+    parser = build_parser()
+    for base in (["tensile_stiffness", "bending_stiffness"], ["tensile_stiffness,bending_stiffness"]):
+        args = parse(parser, ["discover", "TP", "--base", *base, "--out", str(tmp_path / "o")])
+        assert args.data == "TP" and args.base == base  # every name kept, split on commas by the command
     assert main(["discover", "TP", "--out", str(tmp_path / "o"), "--prior", str(tmp_path / "none.toml")]) == 2
     captured = capsys.readouterr()
     assert "none.toml" in captured.err and "held-out runs" not in captured.out  # refused before it starts

@@ -87,9 +87,10 @@ def test_a_scheduler_nothing_listens_at_is_reported_before_dask_tries(monkeypatc
     with pytest.raises(PeanoBayesError, match=f"cannot reach the Dask scheduler at tcp://127.0.0.1:{port}"):
         with make_executor(f"tcp://127.0.0.1:{port}"):
             pass
-    with pytest.raises(PeanoBayesInputError, match="expected tcp://HOST:PORT"):
-        with make_executor("tcp://head"):
-            pass
+    for bad in ("tcp://head", "tcp://head:70000", "tcp://head:0"):
+        with pytest.raises(PeanoBayesInputError, match="expected tcp://HOST:PORT"):
+            with make_executor(bad):
+                pass
 
 
 def test_fresh_workers_run_every_unit_in_a_new_process():

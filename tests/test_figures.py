@@ -166,7 +166,10 @@ def test_material_and_cross_material_figures_are_written(result_dir, tmp_path):
     assert metrics["draws"] == 8 and all(len(v) == 8 for v in metrics["draw_values"].values())
     # Two "materials" from one result (the cross-material plumbing needs no second fit), with a known order: "P"
     # is TP with every criterion twice as good in every draw, so P is clearly best by each and TP never is.
-    results = {"TP": idata, "P": idata}
+    doubled = idata.copy()  # "P": every parameter draw twice TP's, so each material's own draws are told apart
+    for name in doubled.posterior.data_vars:
+        doubled.posterior[name] = 2.0 * doubled.posterior[name]
+    results = {"TP": idata, "P": doubled}
     better = {c: np.asarray(metrics["draw_values"][c]) * 2.0 ** CRITERIA[c] for c in CRITERIA}
     per_material = {"TP": metrics, "P": {**metrics, "material": "P", "draw_values": better}}
     ranking = rank_materials({c: m["draw_values"] for c, m in per_material.items()})
@@ -179,9 +182,10 @@ def test_material_and_cross_material_figures_are_written(result_dir, tmp_path):
     for name, (codes, median, low, high, unit) in forest.items():
         assert codes == ["TP", "P"] and unit
         values = idata.posterior[name].values.ravel()
-        assert median == [np.median(values)] * 2, name  # each parameter's own draws, not another's
-        inside = np.mean((values >= low[0]) & (values <= high[0]))
-        assert 0.93 <= inside <= 0.95, (name, inside)  # a 94 % interval of those draws
+        assert median == [np.median(values), 2.0 * np.median(values)], name  # each one's own draws, in order
+        for scale, lo, hi in zip((1.0, 2.0), low, high, strict=True):
+            inside = np.mean((scale * values >= lo) & (scale * values <= hi))
+            assert 0.93 <= inside <= 0.95, (name, inside)  # a 94 % interval of those draws
     assert "hysteresis_loss" in published_data(per_material)
     out = cross_material_figures(tmp_path, results, per_material, ranking)
     assert sorted(p.name for p in out) == sorted(

@@ -64,10 +64,15 @@ def test_results_page_shows_population_new_specimen_and_weakly_informed_paramete
     assert "**Posterior close to its prior** (contraction below 0.5): specimen_log_sd." in page
     assert "close to its prior" not in index_markdown([_summary(0.8)])
     assert "Held, not sampled" not in page  # an old summary, or one that held nothing
-    held = index_markdown([{**_summary(0.8), "fixed": {"length_fraction": 0.8, "orifice_area_m2": 5e-06}}])
+    fixed = {"length_fraction": 0.8, "friction_force_n": 1.5, "orifice_area_m2": 5e-06}
+    held = index_markdown([{**_summary(0.8), "fixed": fixed}])
     assert "**Held, not sampled** (every interval here is conditional on these values): length_fraction = 0.8, " in held
-    assert "orifice_area_m2 = 5e-06." in held and "The shape constants (length_fraction) are held" in held
-    assert "shape constants" not in index_markdown([{**_summary(0.8), "fixed": {"orifice_area_m2": 5e-06}}])
+    assert "friction_force_n = 1.5." in held and "The shape constants (length_fraction) are held" in held
+    assert "orifice_area_m2" not in held  # step-only, not fitted: the step metrics draw it from the prior
+    with_step = index_markdown([{**_summary(0.8), "tests": ["load_cycle", "step"], "fixed": fixed}])
+    assert "friction_force_n = 1.5, orifice_area_m2 = 5e-06." in with_step
+    assert "shape constants" not in index_markdown([{**_summary(0.8), "fixed": {"friction_force_n": 1.5}}])
+    assert "Held, not sampled" not in index_markdown([{**_summary(0.8), "fixed": {"orifice_area_m2": 5e-06}}])
     assert "Timings: least squares 1.0 s," in page  # chosen without discovery
     timed = {**_summary(0.2), "timings_s": {**_summary(0.2)["timings_s"], "discovery_s": 107.54}}
     assert "Timings: discovery 107.5 s, least squares 1.0 s," in index_markdown([timed])

@@ -66,10 +66,15 @@ def test_stiffness_is_the_stretching_branchs_slope_at_minus_one_and_a_half_perce
 
 
 def test_blocking_force_and_stroke_per_their_definitions():
+    """Blocking force: the median force over the top 2 % of the pressure ramp per MPa (300 N/MPa here; a spike at
+    the last sample must not move it). Stroke: the final minus the initial strain, each a median of the first and
+    last 2 % (0.10 here, not the 0.12 of an overshoot to 0.13 on the way)."""
     pressure = np.linspace(0.0, 200e3, 1001)
     force = 3e-4 * pressure + 0.5 * np.sin(np.linspace(0, 40, 1001)) * (pressure < 150e3)  # 300 N/MPa at the top
+    force[-1] += 20.0
     assert blocking_force_per_pressure(pressure, force) == pytest.approx(300.0, rel=1e-12)
-    strain = np.concatenate([np.full(200, 0.01), np.linspace(0.01, 0.11, 600), np.full(200, 0.11)])
+    rise = np.interp(np.linspace(0, 1, 600), [0, 0.5, 1], [0.01, 0.13, 0.11])
+    strain = np.concatenate([np.full(200, 0.01), rise, np.full(200, 0.11)])
     assert stroke(strain) == pytest.approx(0.10, rel=1e-12)
 
 
@@ -79,7 +84,7 @@ def test_step_metrics_of_a_known_rise():
     of u^2 (1 - u)^4 is 1/105); the power and efficiency are recomputed from the analytic speed and acceleration
     (the inertial term of m (g + a) v adds to the RMS power; its sign cannot show, since the speed is zero at both
     ends of the window and the cross term integrates v^2 dv); no overshoot."""
-    amplitude, rise_s, load_n, p_pa, flow = 0.05, 0.05, 40.0, 200e3, 2e-5  # peak acceleration 0.7 g
+    amplitude, rise_s, load_n, p_pa, flow = 0.05, 0.05, 40.0, 200e3, 2e-5  # peak acceleration 1.5 g
     t = np.linspace(-0.2, 0.6, 80_001)
     u = np.clip(t, 0.0, rise_s) / rise_s
     strain = amplitude * 12 * (u**2 / 2 - 2 * u**3 / 3 + u**4 / 4)

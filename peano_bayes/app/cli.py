@@ -60,6 +60,14 @@ class _Parser(argparse.ArgumentParser):
     commands: dict[str, argparse.ArgumentParser]
 
     def error(self, message):
+        required = "the following arguments are required: "
+        if message.startswith(required) and any(not n.startswith("-") for n in message[len(required) :].split(", ")):
+            lists = [a.option_strings[-1] for a in self._actions if a.option_strings and a.nargs == "+"]
+            if lists:  # a list option before the positional argument took it as one of its values
+                message += (
+                    f" (a list option such as {lists[0]} takes every word after it up to the next option: give "
+                    "the positional arguments first)"
+                )
         raise UsageError(self, message)
 
 

@@ -403,10 +403,10 @@ def _check_reachable(address: str, timeout_s: float = CONNECT_PROBE_S) -> None:
     if scheme not in ("tcp", "tls"):
         return
     host, _, port = rest.split("/")[0].rpartition(":")
+    if not (port.isdigit() and 1 <= int(port) <= 65535):
+        raise PeanoBayesInputError(f"scheduler {address!r}: expected {scheme}://HOST:PORT, PORT 1 to 65535")
     try:
         socket.create_connection((host.strip("[]") or "localhost", int(port)), timeout=timeout_s).close()
-    except ValueError:
-        raise PeanoBayesInputError(f"scheduler {address!r}: expected {scheme}://HOST:PORT") from None
     except OSError as err:
         raise PeanoBayesError(
             f"cannot reach the Dask scheduler at {address} ({err.strerror or err}); is it running, and is the "

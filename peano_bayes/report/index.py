@@ -8,7 +8,7 @@ from pathlib import Path
 
 from ..formatting import format_number
 from ..inference.fit import structured_tests
-from ..inference.posterior import DEFAULT_HELD
+from ..inference.posterior import DEFAULT_HELD, STEP_ONLY_PARAMETERS
 from ..inference.results import (
     RIDGE_CORRELATION,
 )
@@ -20,11 +20,14 @@ DISCOVERY_FOLDER = "discovery"
 WEAKLY_INFORMED = 0.5
 
 
-def held_lines(fixed: dict) -> list[str]:
+def held_lines(fixed: dict, tests=()) -> list[str]:
     """``index.md`` lines naming the model parameters a fit held instead of sampling (``summary.json``'s
-    ``fixed``, SI units as in their names): every interval of the result is conditional on these values. The
-    shape constants of :data:`~peano_bayes.inference.posterior.DEFAULT_HELD` are held at nominal unless
-    ``--sample-all``; where a muscle's differ, intervals that hold them are too narrow and can miss."""
+    ``fixed``, SI units as in their names), but for the step-only parameters of a fit without the step test
+    (``tests``: the fitted tests), which the step metrics draw from the prior: every interval of the result is
+    conditional on these values. The shape constants of :data:`~peano_bayes.inference.posterior.DEFAULT_HELD`
+    are held at nominal unless ``--sample-all``; where a muscle's differ, intervals that hold them are too narrow
+    and can miss."""
+    fixed = {k: v for k, v in fixed.items() if "step" in tests or k not in STEP_ONLY_PARAMETERS}
     if not fixed:
         return []
     values = ", ".join(f"{name} = {format_number(value)}" for name, value in fixed.items())
@@ -212,7 +215,7 @@ def index_markdown(
                 "The fitted tests say little about these; their intervals are mostly the prior's.",
             ]
         lines += ridge_lines(s.get("ridges", []))
-        lines += held_lines(s.get("fixed", {}))
+        lines += held_lines(s.get("fixed", {}), s["tests"])
         correlation = s.get("residual_correlation", {})
         lines += [
             "",

@@ -22,8 +22,8 @@ physics' noise-free signals plus the effect's own contribution in the package's 
 (:func:`effect_contribution`: the noise-free truth with the effect at its strength minus without, one specimen at
 seed 0, on the case's conditions), then the rig's noise. The strength is calibrated on that contribution over
 the tests the physics runs (:func:`case_strengths`), so the nominal SNR is the transplanted signal's. On Veale's
-model an effect whose signal shows only in the step test (the registry's ``shows_in``: ``flow_restriction``,
-``nonlinear_damping``) cannot be hidden.
+model an effect whose signal shows only in the step test (the registry's ``shows_in``: ``viscoelastic_relaxation``,
+``flow_restriction``, ``nonlinear_damping``) cannot be hidden.
 
 **Drawn conditions** (``Case.conditions = "drawn"``): the quasi-static sampling rate (10-100 Hz) and the test
 pressure (100-400 kPa, peak forces about 100-300 N) drawn from the seed (:func:`~peano_bayes.rig.draw_conditions`,

@@ -105,17 +105,25 @@ def check(args):
 check.arguments = lambda p: p.add_argument("data", metavar="DATA", help=_DATA_HELP)
 
 
+#: Suffixes of other file types, refused at the end of ``simulate --out`` (any other dotted word is part of a stem).
+_OTHER_FILE_TYPES = (".txt", ".dat", ".json", ".tsv", ".xls", ".xlsx", ".nc", ".npz", ".npy", ".h5", ".hdf5",
+                     ".parquet", ".md", ".log", ".zip", ".tar", ".gz", ".bz2", ".xz", ".pkl", ".bak")  # fmt: skip
+
+
 @command("simulate", "the virtual rig: write a dataset (CSV + TOML sidecar) simulated from given parameters")
 def simulate(args):
     from ...data import dataset_paths, save
     from ...rig import read_parameter_file, simulate_dataset
 
     params, config = read_parameter_file(args.params) if args.params else ({}, None)
-    suffix = Path(args.out).suffix
-    if suffix.lower() not in ("", ".csv", ".toml") and suffix[1:].isalpha():  # x.txt, not a stem like FC_1.5mm
+    out = Path(args.out)
+    if out.suffix.lower() in _OTHER_FILE_TYPES:  # x.txt would become x.txt.csv; a stem like FC.v2 is a stem
+        stem = out
+        while stem.suffix.lower() in (*_OTHER_FILE_TYPES, ".csv"):
+            stem = stem.with_suffix("")
         raise PeanoBayesInputError(
-            f"--out: {args.out} ends in {suffix!r}; a dataset is written as PATH.csv with its PATH.toml sidecar: give "
-            f"{Path(args.out).with_suffix('.csv')} (or {args.out}.csv to keep the dot in the name)"
+            f"--out: {args.out} ends in {out.suffix!r}, another file type; a dataset is written as PATH.csv with "
+            f"its PATH.toml sidecar: give {stem}.csv (or {args.out}.csv to keep the suffix in the name)"
         )
     try:
         csv_path, toml_path = dataset_paths(args.out)

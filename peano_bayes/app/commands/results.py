@@ -301,8 +301,8 @@ def _discover_arguments(p):
         action="extend",
         metavar="EFFECT",
         default=None,
-        help="effects already in the base model, space- or comma-separated like the other list options (default: "
-        "tensile_stiffness bending_stiffness)",
+        help="effects already in the base model, space-separated like the other list options (commas also work; "
+        "default: tensile_stiffness bending_stiffness)",
     )
     p.add_argument(
         "--prior",
