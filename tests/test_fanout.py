@@ -104,6 +104,10 @@ def test_fresh_workers_run_every_unit_in_a_new_process():
         kept = run_units(units, executor, log=lambda m: None)
     assert [o.value for o in fresh] == [0, 1, 4, 9] == [o.value for o in kept] and info.kind == "processes"
     assert len({o.worker for o in fresh}) == 4 and len({o.worker for o in kept}) <= 2
+    with make_executor(None, 1, fresh_workers=True) as (executor, info):  # one job: still a process per unit
+        alone = run_units(units[:2], executor, log=lambda m: None)
+    assert info.kind == "processes" and [o.value for o in alone] == [0, 1] and len({o.worker for o in alone}) == 2
+    assert os.getpid() not in {int(o.worker.rsplit(":", 1)[1]) for o in alone}
 
 
 def test_worker_environment_adds_the_thread_flags_once(monkeypatch):
