@@ -43,7 +43,8 @@ def dense_jacobian(residuals, basis=None):
     matrix whose columns span every direction in which the residuals can change (for a fit that holds some of
     ``u`` fixed, the unit vectors of the free entries, padded with zero columns): the Jacobian is then pushed
     forward along those k directions only and mapped back, ``J_k B^T``, exact where the columns span the free
-    directions and k forward tangents cheaper than d.
+    directions and k forward tangents cheaper than d. The tangents of ``args`` are dropped: a derivative with
+    respect to anything in ``args`` (held values, noise scales) comes out zero.
 
     Why: optimistix's Levenberg-Marquardt linearizes the residual function and transposes that linearization for
     the gradient of its trust-region test. Through the physics' scans and root solves that builds the model's
@@ -240,6 +241,31 @@ def residual_function(observations: Observations, prior: Prior, config: ModelCon
     evaluate = _residuals_and_solver_ok(observations, prior, config)
     args = program_arguments(observations.groups, spread, fixed, noise)
     return lambda u, _: evaluate(u, args)[0]
+
+
+def least_squares_program(observations: Observations, prior: Prior, config: ModelConfig, *, max_steps: int,
+                          rtol: float, atol: float):  # fmt: skip
+    """The jitted multi-start least squares of :func:`fit`: ``run(starts (k, d), args)`` with ``args`` from
+    :func:`program_arguments` returns per start the end point (k, d), whether it is usable (finite cost, physics
+    solver within tolerance), whether the solver converged, the cost (k,) (inf where unusable), the Jacobian
+    (k, n, d) and each group's prediction. Data shapes, prior and configuration make the program; the numbers
+    in ``args`` do not, so one compilation serves every seed and held value."""
+    evaluate = _residuals_and_solver_ok(observations, prior, config)
+    fn = dense_jacobian(lambda u, args: evaluate(u, args)[0])
+    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
+
+    def one(u0, args):
+        sol = optx.least_squares(fn, solver, u0, args, max_steps=max_steps, throw=False)
+        r, solver_ok, predictions = evaluate(sol.value, args)
+        cost = 0.5 * jnp.sum(r**2)
+        # A point where the physics solver misses its tolerance has likelihood zero (see likelihood.py).
+        ok = jnp.isfinite(cost) & solver_ok
+        # The end point's Jacobian and predictions come out of the same program: tracing the physics again
+        # in programs of their own costs seconds, evaluating them for every start costs little.
+        jac = jax.jacfwd(fn)(sol.value, args)
+        return sol.value, ok, sol.result == optx.RESULTS.successful, jnp.where(ok, cost, jnp.inf), jac, predictions
+
+    return jax.jit(jax.vmap(one, in_axes=(0, None)))
 
 
 @eqx.filter_jit
@@ -493,28 +519,13 @@ def fit(
     noise = {**DEFAULT_NOISE, **(noise or {})}
     fixed = {k: jnp.asarray(v) for k, v in {**config.nominal_parameters(), **(fixed or {})}.items()}
     fixed = {k: v for k, v in fixed.items() if k not in prior.names}
-    evaluate = _residuals_and_solver_ok(observations, prior, config)
-    fn = dense_jacobian(lambda u, args: evaluate(u, args)[0])
-    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
-
-    def one(u0, args):
-        sol = optx.least_squares(fn, solver, u0, args, max_steps=max_steps, throw=False)
-        r, solver_ok, predictions = evaluate(sol.value, args)
-        cost = 0.5 * jnp.sum(r**2)
-        # A point where the physics solver misses its tolerance has likelihood zero (see likelihood.py).
-        ok = jnp.isfinite(cost) & solver_ok
-        # The end point's Jacobian and predictions come out of the same program: tracing the physics again
-        # in programs of their own costs seconds, evaluating them for every start costs little.
-        jac = jax.jacfwd(fn)(sol.value, args)
-        return sol.value, ok, sol.result == optx.RESULTS.successful, jnp.where(ok, cost, jnp.inf), jac, predictions
-
+    run = least_squares_program(observations, prior, config, max_steps=max_steps, rtol=rtol, atol=atol)
     if max_rounds < 1:
         raise ValueError(f"max_rounds must be >= 1, got {max_rounds!r}")
     if n_starts < 1:
         raise ValueError(f"n_starts must be >= 1, got {n_starts!r}")
     all_starts = np.vstack([np.asarray(prior.median_unconstrained())[None], prior.sample(seed, n_starts - 1)])
     args = program_arguments(observations.groups, prior_spread(prior, seed), fixed, noise)
-    run = jax.jit(jax.vmap(one, in_axes=(0, None)))
     size = min(n_starts, START_BATCH)
     best = None  # (cost, u, jacobian, predictions, converged, rounds) of the best start so far
     values, costs, converged, failed = (np.zeros((0, all_starts.shape[1])), np.zeros(0), np.zeros(0, bool),
