@@ -273,30 +273,46 @@ def test_new_specimens_carry_the_between_specimen_spread_on_the_wall_stiffnesses
     assert np.all(new_specimen_draws(one, sets)["tensile_ka_n_per_m"] == 1000.0)
 
 
+#: The ideal Peano muscle alone: no walls' stiffness, friction or viscosity.
+IDEAL_MUSCLE = dict(bending=False, tensile=False, extension=False, mount=False, parallel_maxwell=0, series_kelvin=0,
+                    friction="none", threshold=False, flow="orifice", damping=False)  # fmt: skip
+
+
+def _ideal_muscle_result(root, length_fraction: np.ndarray) -> None:
+    """``root/TP/posterior.nc``: a result of :data:`IDEAL_MUSCLE` whose draws are ``length_fraction`` (n,)."""
+    n = len(length_fraction)
+    idata = az.from_dict(posterior={"length_fraction": length_fraction[None], "orifice_area_m2": np.full((1, n), 5e-6)})
+    attrs = dict(material="TP", model_config=json.dumps(IDEAL_MUSCLE), fixed_parameters="{}", converged=1)
+    idata.posterior.attrs.update(attrs)
+    (root / "TP").mkdir()
+    idata.to_netcdf(str(root / "TP" / "posterior.nc"))
+
+
+def _niiyama_force_n(pressure_pa: float, width_m: float, length_m, contraction: float):
+    """Niiyama's virtual-work force of the ideal muscle, p w l cos(theta) / theta, theta solving
+    1 - sin(theta) / theta = contraction, by bisection in plain Python [N]."""
+    low, high = 1e-6, math.pi / 2  # 1 - sin(t)/t rises from 0 to 1 - 2/pi on (0, pi/2]
+    for _ in range(200):
+        mid = 0.5 * (low + high)
+        low, high = (mid, high) if 1.0 - math.sin(mid) / mid < contraction else (low, mid)
+    theta = 0.5 * (low + high)
+    return pressure_pa * width_m * length_m * math.cos(theta) / theta
+
+
 def test_the_operating_force_is_the_hand_solved_ideal_muscle_force_when_nothing_dissipates(tmp_path):
-    """A result whose model is the ideal Peano muscle alone (no walls' stiffness, friction or viscosity): its
-    operating force at contraction e and pressure p is Niiyama's virtual-work force p w (f l) cos(theta)/theta,
-    theta solving 1 - sin(theta)/theta = e, solved here by bisection in plain Python, f the posterior's length
-    fraction. The recommendation's median force over 200 draws of f equals it at the median f."""
+    """A result whose model is the ideal Peano muscle alone: its operating force at contraction e and pressure p
+    is Niiyama's virtual-work force p w (f l) cos(theta)/theta, theta solving 1 - sin(theta)/theta = e, f the
+    posterior's length fraction. The recommendation's median force over 200 draws of f equals it at the median
+    f."""
     n = 200
     fraction = np.linspace(0.6, 0.75, n)  # median 0.675, away from the nominal 0.8
-    config = dict(bending=False, tensile=False, extension=False, mount=False, parallel_maxwell=0, series_kelvin=0,
-                  friction="none", threshold=False, flow="orifice", damping=False)  # fmt: skip
-    idata = az.from_dict(posterior={"length_fraction": fraction[None], "orifice_area_m2": np.full((1, n), 5e-6)})
-    idata.posterior.attrs.update(material="TP", model_config=json.dumps(config), fixed_parameters="{}", converged=1)
-    (tmp_path / "TP").mkdir()
-    idata.to_netcdf(str(tmp_path / "TP" / "posterior.nc"))
+    _ideal_muscle_result(tmp_path, fraction)
     requirement = "force_n = 10.0\ncontraction = 0.12\nmax_pressure_kpa = 30\n"
     grid = "n_tubes = [4]\ntube_width_mm = [15, 20]\ntube_length_mm = [49.5]\n"
     path = _spec(tmp_path, requirement, grid + f"[results]\nn_draws = {n}\n")
     report = recommend(path, tmp_path, log=lambda m: None)
-    low, high = 1e-6, math.pi / 2  # 1 - sin(t)/t rises from 0 to 1 - 2/pi on (0, pi/2]
-    for _ in range(200):
-        mid = 0.5 * (low + high)
-        low, high = (mid, high) if 1.0 - math.sin(mid) / mid < 0.12 else (low, mid)
-    theta = 0.5 * (low + high)
     for c in report["candidates"]:
-        forces = 30e3 * 1e-3 * c["tube_width_mm"] * (fraction * 49.5e-3) * math.cos(theta) / theta  # (n,) [N]
+        forces = _niiyama_force_n(30e3, 1e-3 * c["tube_width_mm"], fraction * 49.5e-3, 0.12)  # (n,) [N]
         assert c["force_median_n"] == pytest.approx(np.median(forces), rel=1e-6), c["tube_width_mm"]
         assert c["draws"] == n and c["probability"] == np.mean(forces >= 10.0)
         assert c["p_force_with_margin"] == np.mean(forces >= 10.5)  # 10 N with the 5 % margin to spare
@@ -311,12 +327,7 @@ def test_with_every_parameter_draw_alike_the_force_interval_is_the_misfits_own_n
     that of a normal of sd 2 N, 2 x 1.881 x 2 = 7.52 N wide (within the sampling error of 4000 draws' HDI),
     centred on the hand-solved force: the misfit is added once, at its own size."""
     n = 4000
-    config = dict(bending=False, tensile=False, extension=False, mount=False, parallel_maxwell=0, series_kelvin=0,
-                  friction="none", threshold=False, flow="orifice", damping=False)  # fmt: skip
-    idata = az.from_dict(posterior={"length_fraction": np.full((1, n), 0.7), "orifice_area_m2": np.full((1, n), 5e-6)})
-    idata.posterior.attrs.update(material="TP", model_config=json.dumps(config), fixed_parameters="{}", converged=1)
-    (tmp_path / "TP").mkdir()
-    idata.to_netcdf(str(tmp_path / "TP" / "posterior.nc"))
+    _ideal_muscle_result(tmp_path, np.full(n, 0.7))
     summary = minimal_summary(
         fit_quality_posterior_mean={"blocking": {"excess_rmse": 2.0}},
         residual_correlation={"blocking": {"consistent_with_noise": False, "likelihood_lag1": None}},
@@ -326,12 +337,7 @@ def test_with_every_parameter_draw_alike_the_force_interval_is_the_misfits_own_n
     grid = "n_tubes = [4]\ntube_width_mm = [15]\ntube_length_mm = [49.5]\n"  # the result's own geometry
     report = recommend(_spec(tmp_path, requirement, grid + f"[results]\nn_draws = {n}\n"), tmp_path, log=lambda m: None)
     (c,) = report["candidates"]
-    low, high = 1e-6, math.pi / 2
-    for _ in range(200):
-        mid = 0.5 * (low + high)
-        low, high = (mid, high) if 1.0 - math.sin(mid) / mid < 0.12 else (low, mid)
-    theta = 0.5 * (low + high)
-    force = 30e3 * 15e-3 * (0.7 * 49.5e-3) * math.cos(theta) / theta
+    force = _niiyama_force_n(30e3, 15e-3, 0.7 * 49.5e-3, 0.12)
     assert c["force_discrepancy_sd_n"] == pytest.approx(2.0, rel=1e-9)
     assert c["force_interval_n"][1] - c["force_interval_n"][0] == pytest.approx(2 * 1.881 * 2.0, rel=0.06)
     assert np.mean(c["force_interval_n"]) == pytest.approx(force, abs=0.15)
