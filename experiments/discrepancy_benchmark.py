@@ -18,7 +18,7 @@ the current workflow is ``discrepancy-14000/`` (seeds 14000-14039, SNR 2, every 
 12000-12039 and 13000-13039) were stopped before any table and withdrawn (that file says why). The third
 version's final run is ``discrepancy-15000/`` (seeds 15000-15039, drawn conditions, three physics; its
 ``PREREGISTRATION.md``); a later workflow change's final run starts at ``--first-seed 16000``. Tuning seeds
-20002-20025 are spent; new tuning starts at 20026.
+20002-20025 are spent (and 20100-20101, on a check of the worker batches); new tuning starts at 20026.
 
 Runs are work units of ``peano_bayes.app.fanout`` (``--jobs`` local processes, or a Dask cluster with
 ``--scheduler``). Resumable: this process appends every finished run as one line of ``OUT/runs.jsonl``; a rerun
@@ -60,6 +60,10 @@ from peano_bayes.validation.discovery_benchmark import (
 )
 
 HERE = Path(__file__).resolve().parent
+# runs a local worker serves before a new one replaces it: a new worker spent about 90 s of a run tracing
+# programs again (runs took 130 s in a new worker, 40-60 s in one that had run others), and each run left
+# about 0.4 GB of compiled programs in its worker (52 runs: 20.8 GB of the machine's 24)
+RUNS_PER_WORKER = 10
 TWO_EFFECTS = ("hysteresis", "flow_restriction")
 
 
@@ -160,14 +164,15 @@ def run(
     jobs: int,
     only=None,
     scheduler=None,
-    fresh_workers: bool = True,
+    runs_per_worker: int | None = RUNS_PER_WORKER,
     kinds=None,
 ) -> list[dict]:
     """Calibrate the strengths, then run the to-do list as work units of ``peano_bayes.app.fanout`` (``jobs`` local
-    processes, a new one for each run when ``fresh_workers``, or the Dask cluster of ``scheduler``). This
-    process alone appends each finished run to ``OUT/runs.jsonl``; a run that raised is recorded as a wrong row,
-    not hidden. ``kinds``: :func:`cases`' ``other_physics`` and ``drawn`` (a case calibrated on its own conditions
-    or tests calibrates in its run, :func:`~peano_bayes.validation.discovery_benchmark.run_case`)."""
+    worker processes, replaced by new ones after every ``runs_per_worker`` runs each (``None``: they serve every run),
+    or the Dask cluster of ``scheduler``). This process alone appends each finished run to ``OUT/runs.jsonl``; a run
+    that raised is recorded as a wrong row, not hidden. ``kinds``: :func:`cases`' ``other_physics`` and ``drawn`` (a
+    case calibrated on its own conditions or tests calibrates in its run,
+    :func:`~peano_bayes.validation.discovery_benchmark.run_case`)."""
     out.mkdir(parents=True, exist_ok=True)
     strengths = _calibrate(out, cases(snrs, noise_levels, only, **(kinds or {})))
     todo = _todo(out, snrs, noise_levels, seeds, first_seed, only, kinds)
@@ -187,10 +192,17 @@ def run(
             print(f"{row['label']} snr {row['snr']:g} seed {row['seed']}: {row['outcome']} "
                   f"({'right' if row['correct'] else 'WRONG'})", flush=True)  # fmt: skip
 
-        with make_executor(scheduler, jobs, fresh_workers=fresh_workers) as (executor, info):
-            print(f"runs on {info.describe()}", flush=True)
-            logs = None if executor is None else out / "logs"  # each run's output, kept per worker unit
-            run_units(units, executor, on_result=finished, log=print, log_dir=logs)
+        start = 0
+        while start < len(units):
+            # one executor per batch: its workers end with the batch (a worker keeps every model it compiled, and
+            # one that served 52 runs held 20.8 GB), and a new worker traces its programs once for the batch
+            with make_executor(scheduler, jobs, processes=True) as (executor, info):
+                size = len(units) if runs_per_worker is None or info.kind != "processes" else runs_per_worker * jobs
+                batch = units[start : start + size]
+                print(f"runs {start + 1}-{start + len(batch)} of {len(units)} on {info.describe()}", flush=True)
+                logs = out / "logs"  # each run's output, kept per worker unit
+                run_units(batch, executor, on_result=finished, log=print, log_dir=logs)
+            start += len(batch)
     return list(_read_rows(out).values())
 
 
@@ -346,10 +358,11 @@ def main(argv=None) -> int:
     parser.add_argument("--jobs", type=int, default=2, help="local worker processes")
     parser.add_argument("--scheduler", default=None, help="Dask scheduler: local:N or tcp://HOST:8786")
     parser.add_argument(
-        "--keep-workers",
-        action="store_true",
-        help="let a local worker serve many runs (default: a new process per run, since a worker keeps every "
-        "model it compiled and two of them filled the machine's memory in 2.5 h)",
+        "--runs-per-worker",
+        type=int,
+        default=RUNS_PER_WORKER,
+        help="runs a local worker serves before a new one replaces it (0: it serves all; a worker keeps every "
+        f"model it compiled, about 0.4 GB a run; default {RUNS_PER_WORKER})",
     )
     parser.add_argument(
         "--cases",
@@ -381,6 +394,8 @@ def main(argv=None) -> int:
     out = Path(args.out)
     if args.pool and not args.analyse_only:
         parser.error("--pool needs --analyse-only")
+    if args.runs_per_worker < 0:
+        parser.error(f"--runs-per-worker must be >= 0 (0: a worker serves every run), got {args.runs_per_worker}")
     if args.analyse_only:
         sources = [d for d in [out, *map(Path, args.pool)] if _read_rows(d)]
         rows = [r for d in sources for r in _read_rows(d).values() if args.cases is None or r["label"] in args.cases]
@@ -395,7 +410,7 @@ def main(argv=None) -> int:
                 args.jobs,
                 args.cases,
                 args.scheduler,
-                not args.keep_workers,
+                args.runs_per_worker or None,
                 {"other_physics": args.other_physics, "drawn": args.drawn},
             )
         except PeanoBayesInputError as err:

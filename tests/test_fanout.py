@@ -110,6 +110,20 @@ def test_fresh_workers_run_every_unit_in_a_new_process():
     assert os.getpid() not in {int(o.worker.rsplit(":", 1)[1]) for o in alone}
 
 
+def test_processes_run_one_jobs_units_in_one_worker_that_ends_with_the_block():
+    """``processes=True`` with one job: the units run in one spawned worker, not here, and the next block gets a
+    new worker (how the discovery benchmark recycles its workers every batch of runs)."""
+    units = [Unit(k, _square, (i,)) for i, k in enumerate("abc")]
+    workers = []
+    for _ in range(2):
+        with make_executor(None, 1, processes=True) as (executor, info):
+            outcomes = run_units(units, executor, log=lambda m: None)
+        assert info.kind == "processes" and [o.value for o in outcomes] == [0, 1, 4]
+        workers.append({o.worker for o in outcomes})
+    assert all(len(w) == 1 for w in workers) and workers[0] != workers[1]
+    assert os.getpid() not in {int(w.rsplit(":", 1)[1]) for ws in workers for w in ws}
+
+
 def test_worker_environment_adds_the_thread_flags_once(monkeypatch):
     """A worker started by a capped process gets the same XLA flags, not the one-thread flags twice (JAX's
     persistent cache keys on the flag list: a repeated flag would give the worker's programs other keys)."""
