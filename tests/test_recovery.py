@@ -57,12 +57,13 @@ def test_seeds_and_held_values_are_arguments_of_the_least_squares_program_not_co
     """``fit``'s own compiled program (:func:`least_squares_program`) lowers to one text for two seeds (the prior
     term's spread is drawn with the seed), two sets of held parameter values and two sets of noise scales, so the
     persistent compilation cache serves the second fit (SBC replicates, benchmark runs, datasets with drawn
-    constants); and each of the three does reach the residuals."""
-    import jax
+    constants); and run, that program's result moves with each of the three."""
+    import inspect
 
     from peano_bayes.inference.fit import (
         DEFAULT_NOISE,
-        _residuals_and_solver_ok,
+        START_BATCH,
+        fit,
         least_squares_program,
         prior_spread,
         program_arguments,
@@ -82,15 +83,17 @@ def test_seeds_and_held_values_are_arguments_of_the_least_squares_program_not_co
             {k: noise * v for k, v in DEFAULT_NOISE.items()},
         )
 
-    run = least_squares_program(posterior.observations, prior, posterior.config, max_steps=2, rtol=1e-6, atol=1e-6)
-    starts = np.asarray(prior.median_unconstrained())[None] + 0.1
+    # the settings and batch shape of the fixture's own fit, whose compiled program the persistent cache holds
+    solver = {k: inspect.signature(fit).parameters[k].default for k in ("max_steps", "rtol", "atol")}
+    run = least_squares_program(posterior.observations, prior, posterior.config, **solver)
+    # off the prior's centre, so the prior term (u - centre) / spread is not zero
+    starts = np.repeat(np.asarray(prior.median_unconstrained())[None] + 0.1, min(8, START_BATCH), axis=0)
     assert run.lower(starts, arguments()).as_text() == run.lower(starts, arguments(1, 1.1, 1.2)).as_text()
-    evaluate = _residuals_and_solver_ok(posterior.observations, prior, posterior.config)
-    residuals = jax.jit(lambda u, args: evaluate(u, args)[0])
-    u = starts[0]  # off the prior's centre, so the prior term (u - centre) / spread is not zero
-    base = np.asarray(residuals(u, arguments()))
+    cost = lambda args: np.asarray(run(starts, args)[3])  # noqa: E731  (per start: the end point's cost)
+    base = cost(arguments())
+    assert np.all(np.isfinite(base))
     for changed in (arguments(seed=1), arguments(held=1.1), arguments(noise=1.2)):
-        assert not np.allclose(np.asarray(residuals(u, changed)), base)
+        assert not np.allclose(cost(changed), base, rtol=1e-9, atol=0.0)
 
 
 @pytest.mark.slow

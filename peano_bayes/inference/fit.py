@@ -226,12 +226,14 @@ def _residuals_and_solver_ok(observations: Observations, prior: Prior, config: M
 
 def program_arguments(groups, spread, fixed: dict, noise: dict) -> tuple:
     """``(groups, spread, fixed, noise)`` as the arguments of :func:`_residuals_and_solver_ok`'s ``evaluate``: the
-    numbers as float64 arrays (traced, so they do not enter the compiled program as constants)."""
+    numbers as arrays (traced, so they do not enter the compiled program as constants). The held values keep
+    ``jnp.asarray``'s weak type, as :meth:`Posterior.params` gives them: the physics' traced program
+    (``likelihood._traced_predict_sets``) keys on it, and one type lets the fit and the posterior share it."""
     as_array = lambda v: jnp.asarray(v, dtype=jnp.float64)  # noqa: E731
     return (
         groups,
         as_array(spread),
-        {k: as_array(v) for k, v in fixed.items()},
+        {k: jnp.asarray(v) for k, v in fixed.items()},
         {k: as_array(v) for k, v in noise.items()},
     )
 
@@ -248,8 +250,10 @@ def least_squares_program(observations: Observations, prior: Prior, config: Mode
     """The jitted multi-start least squares of :func:`fit`: ``run(starts (k, d), args)`` with ``args`` from
     :func:`program_arguments` returns per start the end point (k, d), whether it is usable (finite cost, physics
     solver within tolerance), whether the solver converged, the cost (k,) (inf where unusable), the Jacobian
-    (k, n, d) and each group's prediction. Data shapes, prior and configuration make the program; the numbers
-    in ``args`` do not, so one compilation serves every seed and held value."""
+    (k, n, d) and each group's prediction. Data shapes, geometry, prior, configuration and the solver settings
+    make the program; the numbers in ``args`` do not, so every seed and held value lowers to the same program,
+    which the persistent compilation cache (:func:`~peano_bayes.enable_compilation_cache`) compiles once; each
+    call still traces and lowers it."""
     evaluate = _residuals_and_solver_ok(observations, prior, config)
     fn = dense_jacobian(lambda u, args: evaluate(u, args)[0])
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)

@@ -228,7 +228,8 @@ def _static_truths(force, strain_at_force, blocking_force, spec, protocol, tests
     """The noise-free load-cycle, blocking and stroke signals of one specimen of a static model (no hysteresis,
     no dynamics), in session order: ``force(p, strain)`` [N] at pressure p [Pa], ``strain_at_force(p, force)``
     its inverse in strain, ``blocking_force(p)`` [N] at zero strain; load cycles at ``cycle_pressures`` [Pa]
-    (default: 0 and the test pressure) from the strain at the start tension down to ``stretch_strain`` and back,
+    (default: 0 and the test pressure) from the strain at the start tension down to ``stretch_strain`` (at least
+    ``min_stretch`` below the start) and back,
     the blocking force along the pressure ramp, the stroke test's strain where the model carries the hanging
     load. ``spec``: a :class:`~peano_bayes.materials.MaterialSpec`; ``protocol``: a
     :class:`~peano_bayes.rig.RigProtocol`."""
