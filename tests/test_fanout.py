@@ -93,6 +93,21 @@ def test_a_scheduler_nothing_listens_at_is_reported_before_dask_tries(monkeypatc
                 pass
 
 
+def test_a_scheduler_whose_host_name_lookup_hangs_is_reported_within_the_probe_time(monkeypatch):
+    """A socket's timeout does not bound the host name's lookup; the probe as a whole does."""
+    from peano_bayes.app import fanout
+
+    def slow_lookup(*args, **kwargs):
+        time.sleep(30)
+        raise socket.gaierror("lookup gave up")
+
+    monkeypatch.setattr(socket, "getaddrinfo", slow_lookup)
+    start = time.perf_counter()
+    with pytest.raises(PeanoBayesError, match=r"tcp://head.invalid:8786 \(no answer within 0.5 s\)"):
+        fanout._check_reachable("tcp://head.invalid:8786", timeout_s=0.5)
+    assert time.perf_counter() - start < 5
+
+
 def test_fresh_workers_run_every_unit_in_a_new_process():
     """A long fan-out frees what its workers compiled: with ``fresh_workers`` each of four units on two workers
     runs in a process of its own (more units than workers, where a pool that replaced its workers every two

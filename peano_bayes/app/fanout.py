@@ -37,6 +37,7 @@ import os
 import re
 import socket
 import sys
+import threading
 import time
 import traceback
 from collections.abc import Callable, Iterator, Sequence
@@ -406,20 +407,31 @@ def make_executor(
 def _check_reachable(address: str, timeout_s: float = CONNECT_PROBE_S) -> None:
     """Open and close one TCP connection to the scheduler at a ``tcp://`` or ``tls://`` ``address``, so that a
     scheduler that is not running (connection refused) or a host that does not answer is reported at once, not
-    after Dask's 30 s of retries. Other schemes are left to Dask."""
+    after Dask's 30 s of retries. The whole probe, the host name's lookup too, gets ``timeout_s`` seconds (a
+    socket's timeout does not bound the lookup). Other schemes are left to Dask."""
     scheme, _, rest = address.partition("://")
     if scheme not in ("tcp", "tls"):
         return
     host, _, port = rest.split("/")[0].rpartition(":")
     if not (port.isdigit() and 1 <= int(port) <= 65535):
         raise PeanoBayesInputError(f"scheduler {address!r}: expected {scheme}://HOST:PORT, PORT 1 to 65535")
-    try:
-        socket.create_connection((host.strip("[]") or "localhost", int(port)), timeout=timeout_s).close()
-    except OSError as err:
+    failure: list[str] = []
+
+    def probe() -> None:
+        try:
+            socket.create_connection((host.strip("[]") or "localhost", int(port)), timeout=timeout_s).close()
+        except OSError as err:
+            failure.append(err.strerror or str(err))
+
+    prober = threading.Thread(target=probe, name="scheduler-probe", daemon=True)  # daemon: a hung lookup is left
+    prober.start()
+    prober.join(timeout_s)
+    if prober.is_alive():
+        failure.append(f"no answer within {timeout_s:g} s")
+    if failure:
         raise PeanoBayesError(
-            f"cannot reach the Dask scheduler at {address} ({err.strerror or err}); is it running, and is the "
-            "address right?"
-        ) from None
+            f"cannot reach the Dask scheduler at {address} ({failure[0]}); is it running, and is the address right?"
+        )
 
 
 def provenance(info: ExecutorInfo, outcomes: Sequence[Outcome], **extra) -> dict:
