@@ -61,9 +61,10 @@ from peano_bayes.validation.discovery_benchmark import (
 
 HERE = Path(__file__).resolve().parent
 # runs a local worker serves before a new one replaces it: a new worker spent about 90 s of a run tracing
-# programs again (runs took 130 s in a new worker, 40-60 s in one that had run others), and each run left
-# about 0.4 GB of compiled programs in its worker (52 runs: 20.8 GB of the machine's 24)
-RUNS_PER_WORKER = 10
+# programs again (runs took 130 s in a new worker, 40-60 s in one that had run others), and each run leaves its
+# compiled programs in the worker (52 runs in one process: 20.8 GB of the machine's 24; one worker held 10.9 GB
+# after 5 runs that included both other-physics nulls, so 6 keeps a worker and a fit beside it in the memory)
+RUNS_PER_WORKER = 6
 TWO_EFFECTS = ("hysteresis", "flow_restriction")
 
 
@@ -183,26 +184,27 @@ def run(
     ]
     by_key = {run_key(case, seed): (case, seed) for case, seed in todo}
 
-    with open(out / "runs.jsonl", "a") as fh:
-
-        def finished(outcome):
-            row = outcome.value if outcome.ok else failed_row(*by_key[outcome.key], outcome.error)
+    def finished(outcome):
+        row = outcome.value if outcome.ok else failed_row(*by_key[outcome.key], outcome.error)
+        # opened for each row, not held open: when the file is replaced while the run goes on (a git stash or
+        # checkout), a held handle writes the rows into the deleted copy, and they are lost
+        with open(out / "runs.jsonl", "a") as fh:
             fh.write(json.dumps(row) + "\n")
-            fh.flush()
-            print(f"{row['label']} snr {row['snr']:g} seed {row['seed']}: {row['outcome']} "
-                  f"({'right' if row['correct'] else 'WRONG'})", flush=True)  # fmt: skip
+        print(f"{row['label']} snr {row['snr']:g} seed {row['seed']}: {row['outcome']} "
+              f"({'right' if row['correct'] else 'WRONG'})", flush=True)  # fmt: skip
 
-        start = 0
-        while start < len(units):
-            # one executor per batch: its workers end with the batch (a worker keeps every model it compiled, and
-            # one that served 52 runs held 20.8 GB), and a new worker traces its programs once for the batch
-            with make_executor(scheduler, jobs, processes=True) as (executor, info):
-                size = len(units) if runs_per_worker is None or info.kind != "processes" else runs_per_worker * jobs
-                batch = units[start : start + size]
-                print(f"runs {start + 1}-{start + len(batch)} of {len(units)} on {info.describe()}", flush=True)
-                logs = out / "logs"  # each run's output, kept per worker unit
-                run_units(batch, executor, on_result=finished, log=print, log_dir=logs)
-            start += len(batch)
+    start = 0
+    while start < len(units):
+        # one executor per batch: its workers end with the batch (a worker keeps every model it compiled: this
+        # process held 20.8 GB after running 52 runs itself, one worker 9.3 GB after 8), and a new worker traces
+        # its programs once for the batch
+        with make_executor(scheduler, jobs, processes=True) as (executor, info):
+            size = len(units) if runs_per_worker is None or info.kind != "processes" else runs_per_worker * jobs
+            batch = units[start : start + size]
+            print(f"runs {start + 1}-{start + len(batch)} of {len(units)} on {info.describe()}", flush=True)
+            logs = out / "logs"  # each run's output, kept per worker unit
+            run_units(batch, executor, on_result=finished, log=print, log_dir=logs)
+        start += len(batch)
     return list(_read_rows(out).values())
 
 

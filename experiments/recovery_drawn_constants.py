@@ -159,7 +159,8 @@ def main() -> int:
             return 2
         result = analyse([r for r in rows if r["arm"] in args.arms])
         for arm, r in result.items():
-            print(f"{arm}: {r['inside']} of {r['total']} inside ({r['fraction']:.3f}); misses {r['misses']}")
+            share = "no converged fit" if r["fraction"] is None else f"{r['fraction']:.3f}"
+            print(f"{arm}: {r['inside']} of {r['total']} inside ({share}); misses {r['misses']}")
         print(json.dumps(result))
         return 0
     print(f"{len(done)} rows present, {len(plan)} to run", flush=True)

@@ -24,7 +24,7 @@ quantity's coverage is Binomial(n, 0.9) / n. The rule fails a calibrated quantit
 
 The last line printed is one JSON object with every figure.
 
-    python experiments/sbc_acceptance_power.py [--study experiments/sbc-hierarchical-2] [--seed 0]
+    python experiments/sbc_acceptance_power.py [--study experiments/sbc-hierarchical-2] [--seed 0] [--out FILE]
 """
 
 from __future__ import annotations
@@ -102,6 +102,7 @@ def main(argv=None) -> dict:
     parser.add_argument("--miscalibrated", type=float, nargs="+", default=[0.80, 0.84])
     parser.add_argument("--studies", type=int, default=20000, help="Monte Carlo studies per replicate count")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--out", type=Path, help="also write the JSON object to this file (atomically)")
     args = parser.parse_args(argv)
     rng = np.random.default_rng(args.seed)
     names, correlation = rank_correlation(args.study)
@@ -136,6 +137,10 @@ def main(argv=None) -> dict:
             f"{row['pooled_rule_pass']:.3f}; "
             f"detects one quantity whose 90 % interval covers {power}"
         )
+    if args.out is not None:
+        tmp = args.out.with_name(args.out.name + ".tmp")
+        tmp.write_text(json.dumps(out, indent=1) + "\n")
+        tmp.replace(args.out)
     print(json.dumps(out))
     return out
 
