@@ -195,9 +195,7 @@ def run(
 
     start = 0
     while start < len(units):
-        # one executor per batch: its workers end with the batch (a worker keeps every model it compiled: this
-        # process held 20.8 GB after running 52 runs itself, one worker 9.3 GB after 8), and a new worker traces
-        # its programs once for the batch
+        # one executor per batch: its workers end with the batch (see RUNS_PER_WORKER)
         with make_executor(scheduler, jobs, processes=True) as (executor, info):
             size = len(units) if runs_per_worker is None or info.kind != "processes" else runs_per_worker * jobs
             batch = units[start : start + size]
@@ -364,7 +362,7 @@ def main(argv=None) -> int:
         type=int,
         default=RUNS_PER_WORKER,
         help="runs a local worker serves before a new one replaces it (0: it serves all; a worker keeps every "
-        f"model it compiled, about 0.4 GB a run; default {RUNS_PER_WORKER})",
+        f"model it compiled: one held 10.9 GB after 5 runs; default {RUNS_PER_WORKER})",
     )
     parser.add_argument(
         "--cases",

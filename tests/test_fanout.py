@@ -108,21 +108,13 @@ def test_a_scheduler_whose_host_name_lookup_hangs_is_reported_within_the_probe_t
     assert time.perf_counter() - start < 5
 
 
-def test_fresh_workers_run_every_unit_in_a_new_process():
-    """A long fan-out frees what its workers compiled: with ``fresh_workers`` each of four units on two workers
-    runs in a process of its own (more units than workers, where a pool that replaced its workers every two
-    units stopped for ever on Python 3.11); by default the two workers serve all four."""
+def test_two_jobs_share_two_worker_processes():
+    """Two jobs: four units on two spawned workers, which serve them all (the pool keeps its workers)."""
     units = [Unit(k, _square, (i,)) for i, k in enumerate("abcd")]
-    with make_executor(None, 2, fresh_workers=True) as (executor, info):
-        fresh = run_units(units, executor, log=lambda m: None)
-    with make_executor(None, 2) as (executor, _):
+    with make_executor(None, 2) as (executor, info):
         kept = run_units(units, executor, log=lambda m: None)
-    assert [o.value for o in fresh] == [0, 1, 4, 9] == [o.value for o in kept] and info.kind == "processes"
-    assert len({o.worker for o in fresh}) == 4 and len({o.worker for o in kept}) <= 2
-    with make_executor(None, 1, fresh_workers=True) as (executor, info):  # one job: still a process per unit
-        alone = run_units(units[:2], executor, log=lambda m: None)
-    assert info.kind == "processes" and [o.value for o in alone] == [0, 1] and len({o.worker for o in alone}) == 2
-    assert os.getpid() not in {int(o.worker.rsplit(":", 1)[1]) for o in alone}
+    assert info.kind == "processes" and [o.value for o in kept] == [0, 1, 4, 9] and len({o.worker for o in kept}) <= 2
+    assert os.getpid() not in {int(o.worker.rsplit(":", 1)[1]) for o in kept}
 
 
 def test_processes_run_one_jobs_units_in_one_worker_that_ends_with_the_block():

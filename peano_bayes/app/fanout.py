@@ -7,10 +7,10 @@ returns one :class:`Outcome` per unit in the order given, whatever order they fi
 queue, claim file or worker process of their own, so the same units run
 
 - here, one after another (``executor=None``: no process, no pickling; the default of one job);
-- in local worker processes (:func:`make_executor` with ``jobs > 1``, or one job with ``fresh_workers`` or
-  ``processes``: spawned, since JAX must not be forked; their thread pools are left as they are: on two cores,
-  two workers ran SBC replicates 5 % faster than with one XLA thread each, because each worker's serial Python
-  phases leave a core the other can use, ``experiments/bench_scale.py``);
+- in local worker processes (:func:`make_executor` with ``jobs > 1``, or one job with ``processes``: spawned,
+  since JAX must not be forked; their thread pools are left as they are: on two cores, two workers ran SBC
+  replicates 5 % faster than with one XLA thread each, because each worker's serial Python phases leave a core
+  the other can use, ``experiments/bench_scale.py``);
 - on a Dask cluster (``scheduler="local:N"`` starts a ``LocalCluster`` of N one-thread worker processes;
   ``scheduler="tcp://HOST:8786"`` joins a running one; ``$PEANO_BAYES_SCHEDULER`` sets it for every command).
 
@@ -347,42 +347,36 @@ class ExecutorInfo:
 
 @contextlib.contextmanager
 def make_executor(
-    scheduler: str | None = None, jobs: int = 1, *, fresh_workers: bool = False, processes: bool = False
+    scheduler: str | None = None, jobs: int = 1, *, processes: bool = False
 ) -> Iterator[tuple[cf.Executor | None, ExecutorInfo]]:
     """``(executor, info)`` for :func:`run_units`, closed when the block ends.
 
     ``scheduler`` (default ``$PEANO_BAYES_SCHEDULER``):
     - none: ``jobs`` spawned local worker processes (``None``, i.e. here and in order, for one job unless
-      ``fresh_workers`` or ``processes``);
+      ``processes``);
     - ``local:N``: a Dask ``LocalCluster`` of N one-thread worker processes;
     - ``tcp://HOST:PORT``: the Dask cluster of that scheduler (its workers must have peano_bayes installed and
       see the output folder).
 
-    ``fresh_workers`` (local worker processes only): every unit runs in a new worker process, one job too
-    (instead of in the calling process). A worker keeps every program it compiled for as long as it lives, so
-    a long fan-out of units with different models grows without bound (the discovery benchmark's two workers
-    reached 22 GB of the machine's 24 in 2.5 h; one job run in the calling process, 20.8 GB in 1 h 40 min); a
-    new worker reads its programs from the persistent compilation cache. One unit per worker, not K: with more than
-    one, Python 3.11's pool stops replacing the workers that leave and waits for ever (CPython gh-115634).
-
     ``processes`` (local worker processes only): the units run in ``jobs`` spawned workers, one job too, that
-    live until the block ends. A caller with many short units recycles workers by opening one block per batch
-    of units: a new worker spends most of a short unit tracing programs again (the discovery benchmark's
-    runs took about 130 s each in a new worker and 40-60 s in one that had run others), while one that lives for
-    ever keeps every program it compiled.
+    live until the block ends. A worker keeps every program it compiled for as long as it lives, so a long
+    fan-out of units with different models grows without bound (the discovery benchmark's two workers reached
+    22 GB of the machine's 24 in 2.5 h; one job run in the calling process, 20.8 GB in 1 h 40 min), while a new
+    worker spends most of a short unit tracing its programs again (the benchmark's runs took about 130 s each in
+    a new worker and 40-60 s in one that had run others). A caller with many short units therefore recycles its
+    workers by opening one block per batch of units. Not the pool's own recycling (``max_tasks_per_child``): with
+    K > 1, Python 3.11's pool stops replacing the workers that leave and waits for ever (CPython gh-115634).
     """
     if jobs < 1:
         raise PeanoBayesInputError(f"jobs must be >= 1, got {jobs}")
     kind, detail = parse_scheduler(scheduler if scheduler is not None else os.environ.get(SCHEDULER_ENV))
     if kind == "processes":
-        if jobs == 1 and not (fresh_workers or processes):
+        if jobs == 1 and not processes:
             yield None, ExecutorInfo("serial", 1)
             return
         _settle_arviz_stamp()
         ctx = multiprocessing.get_context("spawn")
-        with cf.ProcessPoolExecutor(
-            max_workers=jobs, mp_context=ctx, max_tasks_per_child=1 if fresh_workers else None
-        ) as pool:
+        with cf.ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
             yield pool, ExecutorInfo("processes", jobs)
         return
     distributed = _dask()
