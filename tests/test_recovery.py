@@ -53,6 +53,50 @@ def test_least_squares_continues_in_rounds_until_the_best_start_converges(recove
 
 
 @pytest.mark.slow
+def test_seeds_and_held_values_are_arguments_of_the_least_squares_program_not_constants(recovered):
+    """``fit``'s own compiled program (:func:`least_squares_program`) lowers to one text for two seeds (the prior
+    term's spread is drawn with the seed), two sets of held parameter values and two sets of noise scales, so the
+    persistent compilation cache serves the second fit (SBC replicates, benchmark runs, datasets with drawn
+    constants); and run, that program's result moves with each of the three."""
+    import inspect
+
+    from peano_bayes.inference.fit import (
+        DEFAULT_NOISE,
+        START_BATCH,
+        fit,
+        least_squares_program,
+        prior_spread,
+        program_arguments,
+    )
+    from peano_bayes.inference.prior_files import prior_for
+
+    posterior, _, _, _, fitted = recovered
+    prior = prior_for("TP").select(list(fitted.names))
+    groups, fixed = posterior.observations.groups, {k: float(v) for k, v in posterior.fixed.items()}
+    assert fixed
+
+    def arguments(seed=0, held=1.0, noise=1.0):
+        return program_arguments(
+            groups,
+            prior_spread(prior, seed),
+            {k: held * v for k, v in fixed.items()},
+            {k: noise * v for k, v in DEFAULT_NOISE.items()},
+        )
+
+    # the settings and batch shape of the fixture's own fit, whose compiled program the persistent cache holds
+    solver = {k: inspect.signature(fit).parameters[k].default for k in ("max_steps", "rtol", "atol")}
+    run = least_squares_program(posterior.observations, prior, posterior.config, **solver)
+    # off the prior's centre, so the prior term (u - centre) / spread is not zero
+    starts = np.repeat(np.asarray(prior.median_unconstrained())[None] + 0.1, min(8, START_BATCH), axis=0)
+    assert run.lower(starts, arguments()).as_text() == run.lower(starts, arguments(1, 1.1, 1.2)).as_text()
+    cost = lambda args: np.asarray(run(starts, args)[3])  # noqa: E731  (per start: the end point's cost)
+    base = cost(arguments())
+    assert np.all(np.isfinite(base))
+    for changed in (arguments(seed=1), arguments(held=1.1), arguments(noise=1.2)):
+        assert not np.allclose(cost(changed), base, rtol=1e-9, atol=0.0)
+
+
+@pytest.mark.slow
 def test_fit_residuals_match_the_sensor_noise(recovered):
     """With the driving inputs denoised (likelihood.prepare), the residuals are sensor noise; with the raw
     noisy inputs they were 0.46 N per sample against 0.2 N."""

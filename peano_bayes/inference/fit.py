@@ -43,7 +43,8 @@ def dense_jacobian(residuals, basis=None):
     matrix whose columns span every direction in which the residuals can change (for a fit that holds some of
     ``u`` fixed, the unit vectors of the free entries, padded with zero columns): the Jacobian is then pushed
     forward along those k directions only and mapped back, ``J_k B^T``, exact where the columns span the free
-    directions and k forward tangents cheaper than d.
+    directions and k forward tangents cheaper than d. The tangents of ``args`` are dropped: a derivative with
+    respect to anything in ``args`` (held values, noise scales) comes out zero.
 
     Why: optimistix's Levenberg-Marquardt linearizes the residual function and transposes that linearization for
     the gradient of its trust-region test. Through the physics' scans and root solves that builds the model's
@@ -195,15 +196,18 @@ def prior_spread(prior: Prior, seed: int) -> jnp.ndarray:
     return jnp.asarray(np.maximum(np.std(draws, axis=0), 1e-3))
 
 
-def _residuals_and_solver_ok(observations: Observations, prior: Prior, config: ModelConfig, noise, spread, fixed):
-    """``evaluate(u, groups) -> (residuals (n,), solver_ok, predictions)``: the weighted residuals of the run
-    ``groups`` (those of ``observations`` or others of the same shapes), whether every simulation met its
-    solver tolerance (:data:`SOLVER_TOLERANCE`) and each group's prediction (r, m), from one simulation. The
-    groups are an argument, not a constant of the compiled program, so materials whose data shapes and prior
-    agree share one program through the persistent compilation cache."""
+def _residuals_and_solver_ok(observations: Observations, prior: Prior, config: ModelConfig):
+    """``evaluate(u, args) -> (residuals (n,), solver_ok, predictions)`` with ``args = (groups, spread, fixed,
+    noise)`` (:func:`program_arguments`): the weighted residuals of the run ``groups`` (those of ``observations``
+    or others of the same shapes), whether every simulation met its solver tolerance (:data:`SOLVER_TOLERANCE`)
+    and each group's prediction (r, m), from one simulation. The groups, the prior term's ``spread`` (d,), the
+    ``fixed`` parameters and the ``noise`` scales are arguments, not constants of the compiled program, so fits
+    whose data shapes, prior and configuration agree (materials, seeds, drawn constants) share one program
+    through the persistent compilation cache."""
     centre = prior.median_unconstrained()
 
-    def evaluate(u, groups):
+    def evaluate(u, args):
+        groups, spread, fixed, noise = args
         params = {**fixed, **prior.from_unconstrained(u)}
         parts, ok, predictions = [], jnp.asarray(True), []
         for group in groups:
@@ -220,10 +224,52 @@ def _residuals_and_solver_ok(observations: Observations, prior: Prior, config: M
     return evaluate
 
 
+def program_arguments(groups, spread, fixed: dict, noise: dict) -> tuple:
+    """``(groups, spread, fixed, noise)`` as the arguments of :func:`_residuals_and_solver_ok`'s ``evaluate``: the
+    numbers as arrays (traced, so they do not enter the compiled program as constants). The held values keep
+    ``jnp.asarray``'s weak type, as :meth:`Posterior.params` gives them: the physics' traced program
+    (``likelihood._traced_predict_sets``) keys on it, and one type lets the fit and the posterior share it."""
+    as_array = lambda v: jnp.asarray(v, dtype=jnp.float64)  # noqa: E731
+    return (
+        groups,
+        as_array(spread),
+        {k: jnp.asarray(v) for k, v in fixed.items()},
+        {k: as_array(v) for k, v in noise.items()},
+    )
+
+
 def residual_function(observations: Observations, prior: Prior, config: ModelConfig, noise, spread, fixed):
     """``fn(u, args) -> residuals (n,)`` for optimistix, over the parameters of ``prior`` (the rest ``fixed``)."""
-    evaluate = _residuals_and_solver_ok(observations, prior, config, noise, spread, fixed)
-    return lambda u, args: evaluate(u, observations.groups)[0]
+    evaluate = _residuals_and_solver_ok(observations, prior, config)
+    args = program_arguments(observations.groups, spread, fixed, noise)
+    return lambda u, _: evaluate(u, args)[0]
+
+
+def least_squares_program(observations: Observations, prior: Prior, config: ModelConfig, *, max_steps: int,
+                          rtol: float, atol: float):  # fmt: skip
+    """The jitted multi-start least squares of :func:`fit`: ``run(starts (k, d), args)`` with ``args`` from
+    :func:`program_arguments` returns per start the end point (k, d), whether it is usable (finite cost, physics
+    solver within tolerance), whether the solver converged, the cost (k,) (inf where unusable), the Jacobian
+    (k, n, d) and each group's prediction. Data shapes, geometry, prior, configuration and the solver settings
+    make the program; the numbers in ``args`` do not, so every seed and held value lowers to the same program,
+    which the persistent compilation cache (:func:`~peano_bayes.enable_compilation_cache`) compiles once; each
+    call still traces and lowers it."""
+    evaluate = _residuals_and_solver_ok(observations, prior, config)
+    fn = dense_jacobian(lambda u, args: evaluate(u, args)[0])
+    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
+
+    def one(u0, args):
+        sol = optx.least_squares(fn, solver, u0, args, max_steps=max_steps, throw=False)
+        r, solver_ok, predictions = evaluate(sol.value, args)
+        cost = 0.5 * jnp.sum(r**2)
+        # A point where the physics solver misses its tolerance has likelihood zero (see likelihood.py).
+        ok = jnp.isfinite(cost) & solver_ok
+        # The end point's Jacobian and predictions come out of the same program: tracing the physics again
+        # in programs of their own costs seconds, evaluating them for every start costs little.
+        jac = jax.jacfwd(fn)(sol.value, args)
+        return sol.value, ok, sol.result == optx.RESULTS.successful, jnp.where(ok, cost, jnp.inf), jac, predictions
+
+    return jax.jit(jax.vmap(one, in_axes=(0, None)))
 
 
 @eqx.filter_jit
@@ -477,29 +523,13 @@ def fit(
     noise = {**DEFAULT_NOISE, **(noise or {})}
     fixed = {k: jnp.asarray(v) for k, v in {**config.nominal_parameters(), **(fixed or {})}.items()}
     fixed = {k: v for k, v in fixed.items() if k not in prior.names}
-    spread = prior_spread(prior, seed)
-    evaluate = _residuals_and_solver_ok(observations, prior, config, noise, spread, fixed)
-    fn = dense_jacobian(lambda u, groups: evaluate(u, groups)[0])
-    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
-
-    def one(u0, groups):
-        sol = optx.least_squares(fn, solver, u0, groups, max_steps=max_steps, throw=False)
-        r, solver_ok, predictions = evaluate(sol.value, groups)
-        cost = 0.5 * jnp.sum(r**2)
-        # A point where the physics solver misses its tolerance has likelihood zero (see likelihood.py).
-        ok = jnp.isfinite(cost) & solver_ok
-        # The end point's Jacobian and predictions come out of the same program: tracing the physics again
-        # in programs of their own costs seconds, evaluating them for every start costs little.
-        jac = jax.jacfwd(fn)(sol.value, groups)
-        return sol.value, ok, sol.result == optx.RESULTS.successful, jnp.where(ok, cost, jnp.inf), jac, predictions
-
+    run = least_squares_program(observations, prior, config, max_steps=max_steps, rtol=rtol, atol=atol)
     if max_rounds < 1:
         raise ValueError(f"max_rounds must be >= 1, got {max_rounds!r}")
     if n_starts < 1:
         raise ValueError(f"n_starts must be >= 1, got {n_starts!r}")
     all_starts = np.vstack([np.asarray(prior.median_unconstrained())[None], prior.sample(seed, n_starts - 1)])
-    groups = observations.groups
-    run = jax.jit(jax.vmap(one, in_axes=(0, None)))
+    args = program_arguments(observations.groups, prior_spread(prior, seed), fixed, noise)
     size = min(n_starts, START_BATCH)
     best = None  # (cost, u, jacobian, predictions, converged, rounds) of the best start so far
     values, costs, converged, failed = (np.zeros((0, all_starts.shape[1])), np.zeros(0), np.zeros(0, bool),
@@ -512,7 +542,7 @@ def fit(
         rounds = 0
         while rounds < max_rounds:
             rounds += 1
-            v, ok, conv, c, jacs, predictions = run(jnp.asarray(starts), groups)
+            v, ok, conv, c, jacs, predictions = run(jnp.asarray(starts), args)
             v, conv = np.asarray(v), np.asarray(conv)
             batch_failed |= ~np.asarray(ok)
             c = np.where(batch_failed, np.inf, np.asarray(c))
@@ -572,9 +602,11 @@ __all__ = [
     "fit_quality",
     "lag1_effective_size",
     "lag1_sums",
+    "least_squares_program",
     "noise_excess",
     "prior_spread",
     "predictions",
+    "program_arguments",
     "residual_correlation",
     "structured_tests",
     "residual_function",

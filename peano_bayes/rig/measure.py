@@ -9,10 +9,11 @@ import math
 import string
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
-from ..data import Run
+from ..data import Dataset, Run
 from ..data.dataset import OPTIONAL_SIGNALS
 from ..errors import PeanoBayesError, PeanoBayesInputError, did_you_mean
 from .protocol import _NOISE_STREAM, _SPECIMEN_STREAM, RIG_TESTS, RigNoise, check_parameter
@@ -221,6 +222,76 @@ def _other_physics_runs(params, varying, truths_of, *, seed, specimens, spread, 
         truths = truths_of(type(params)(**own))
         runs += _session_runs(label, index, truths, seed=seed, noise=noise, repeats=repeats, drift=False, added=added)
     return base, runs, per_specimen
+
+
+def _static_truths(force, strain_at_force, blocking_force, spec, protocol, tests, cycle_pressures=None) -> list[_Truth]:
+    """The noise-free load-cycle, blocking and stroke signals of one specimen of a static model (no hysteresis,
+    no dynamics), in session order: ``force(p, strain)`` [N] at pressure p [Pa], ``strain_at_force(p, force)``
+    its inverse in strain, ``blocking_force(p)`` [N] at zero strain; load cycles at ``cycle_pressures`` [Pa]
+    (default: 0 and the test pressure) from the strain at the start tension down to ``stretch_strain`` (at least
+    ``min_stretch`` below the start) and back,
+    the blocking force along the pressure ramp, the stroke test's strain where the model carries the hanging
+    load. ``spec``: a :class:`~peano_bayes.materials.MaterialSpec`; ``protocol``: a
+    :class:`~peano_bayes.rig.RigProtocol`."""
+    p_test = spec.test_pressure_pa
+    slow = partial(_sample_times, protocol.quasi_static_rate_hz)
+    truths = []
+    if "load_cycle" in tests:
+        t = slow(protocol.cycle_duration_s)
+        for condition, p in enumerate((0.0, p_test) if cycle_pressures is None else cycle_pressures):
+            start = float(strain_at_force(p, spec.start_tension_n))
+            low = min(protocol.stretch_strain, start - protocol.min_stretch)
+            strain = np.interp(t, [0.0, 0.5 * t[-1], t[-1]], [start, low, start])
+            load = np.asarray(force(p, strain), dtype=float)
+            truths.append(_Truth("load_cycle", condition, t, np.full_like(t, p), strain, load))
+    if "blocking" in tests:
+        t = slow(protocol.ramp_duration_s)
+        ramp = p_test * t / t[-1]
+        truths.append(_Truth("blocking", 0, t, ramp, np.zeros_like(t), np.asarray(blocking_force(ramp), dtype=float)))
+    if "stroke" in tests:
+        t = slow(protocol.ramp_duration_s)
+        ramp = p_test * t / t[-1]
+        strain = np.asarray(strain_at_force(ramp, protocol.stroke_load_n), dtype=float)
+        truths.append(_Truth("stroke", 0, t, ramp, strain, load_n=protocol.stroke_load_n))
+    return truths
+
+
+def _check_signals(model: str, truths: list[_Truth]) -> None:
+    """Check the noise-free signals of a model without a solver residual (explicit formulas, a fixed-step
+    integration): finite everywhere, named ``model`` in the error."""
+    for truth in truths:
+        signals = [x for x in (truth.strain, truth.force_n) if x is not None]
+        _checked(f"{model}, {truth.test} test", (signals, 0.0), 0.0, "")
+
+
+def _other_physics_dataset(
+    spec, geometry, runs, *, source, model, per_specimen, seed, noise, spread, protocol, repeats, added, runs_note=None
+) -> Dataset:
+    """The :class:`~peano_bayes.data.Dataset` of another physics' ``runs`` on ``geometry``, its provenance naming
+    the generating ``model`` (:func:`_provenance`), the load cycles' pressures where ``runs_note`` says them, and
+    the runs that ``added`` (:func:`_check_added`) changed."""
+    provenance = _provenance(
+        source=source,
+        seed=seed,
+        model=model,
+        per_specimen=per_specimen,
+        noise=noise,
+        drift=False,
+        spread=spread,
+        protocol=protocol,
+        repeats=repeats,
+    )
+    if runs_note is not None:
+        provenance["runs"] = runs_note
+    if added:
+        provenance["added"] = json.dumps({f"{test} {run}": sorted(signals) for (test, run), signals in added.items()})
+    return Dataset(
+        material=spec.data_material(),
+        geometry=geometry,
+        conditions=spec.conditions(),
+        runs=_fill_optional(runs),
+        provenance=provenance,
+    )
 
 
 def _session_runs(label: str, index: int, truths, *, seed: int, noise: RigNoise, repeats: int, drift: bool, added=None):

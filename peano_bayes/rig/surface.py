@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import json
 from collections.abc import Iterable, Mapping
-from functools import partial
 
 import jax
 import numpy as np
@@ -35,11 +34,11 @@ from ..physics.reference import (
 from .measure import (
     _check_added,
     _check_run,
-    _checked,
-    _fill_optional,
+    _check_signals,
+    _other_physics_dataset,
     _other_physics_runs,
-    _provenance,
     _sample_times,
+    _static_truths,
     _Truth,
 )
 from .protocol import DEFAULT_NOISE, DEFAULT_PROTOCOL, RIG_TESTS, RigNoise, RigProtocol
@@ -60,28 +59,16 @@ _surface_step = jax.jit(simulate_surface_step, static_argnames="substeps")
 
 def _surface_truths(params, spec: MaterialSpec, protocol: RigProtocol, tests) -> list[_Truth]:
     """The noise-free signals of every test condition of one specimen of the surface, in session order."""
-    p_test = spec.test_pressure_pa
-    slow = partial(_sample_times, protocol.quasi_static_rate_hz)
-    truths = []
-    if "load_cycle" in tests:
-        t = slow(protocol.cycle_duration_s)
-        for condition, p in enumerate((0.0, p_test)):
-            start = float(_surface_strain(p, spec.start_tension_n, params))
-            low = min(protocol.stretch_strain, start - protocol.min_stretch)
-            strain = np.interp(t, [0.0, 0.5 * t[-1], t[-1]], [start, low, start])
-            force = np.asarray(_surface_force(p, strain, params), dtype=float)
-            truths.append(_Truth("load_cycle", condition, t, np.full_like(t, p), strain, force))
-    if "blocking" in tests:
-        t = slow(protocol.ramp_duration_s)
-        ramp = p_test * t / t[-1]
-        force = np.asarray(_surface_force(ramp, 0.0, params), dtype=float)
-        truths.append(_Truth("blocking", 0, t, ramp, np.zeros_like(t), force))
-    if "stroke" in tests:
-        t = slow(protocol.ramp_duration_s)
-        ramp = p_test * t / t[-1]
-        strain = np.asarray(_surface_strain(ramp, protocol.stroke_load_n, params), dtype=float)
-        truths.append(_Truth("stroke", 0, t, ramp, strain, load_n=protocol.stroke_load_n))
+    truths = _static_truths(
+        lambda p, strain: _surface_force(p, strain, params),
+        lambda p, force: _surface_strain(p, force, params),
+        lambda p: _surface_force(p, 0.0, params),
+        spec,
+        protocol,
+        tests,
+    )
     if "step" in tests:
+        p_test = spec.test_pressure_pa
         t = _sample_times(protocol.step_rate_hz, protocol.step_duration_s)
         supply = np.where(t >= protocol.step_delay_s, p_test, 0.0)
         zeta = float(sarosi_damping_ratio(p_test))
@@ -90,9 +77,7 @@ def _surface_truths(params, spec: MaterialSpec, protocol: RigProtocol, tests) ->
         )
         strain = np.asarray(result.strain, dtype=float)
         truths.append(_Truth("step", 0, t, supply, strain, None, supply, None, spec.step_load_n))
-    for truth in truths:  # explicit formulas and a fixed-step integration: only the signals are checked
-        signals = [x for x in (truth.strain, truth.force_n) if x is not None]
-        _checked(f"the force surface, {truth.test} test", (signals, 0.0), 0.0, "")
+    _check_signals("the force surface", truths)
     return truths
 
 
@@ -145,26 +130,20 @@ def simulate_surface_dataset(
     model = {"model": "sarosi_type_surface", "parameters": json.dumps(base)}
     if "step" in tests:
         model["step_damping_ratio"] = repr(float(sarosi_damping_ratio(spec.test_pressure_pa)))
-    provenance = _provenance(
+    return _other_physics_dataset(
+        spec,
+        VALIDATION_GEOMETRY,
+        runs,
         source="synthetic: a Sarosi-type force surface (peano_bayes.rig.simulate_surface_dataset), not a "
         "measurement and not peano_bayes' own physics",
-        seed=seed,
         model=model,
         per_specimen=per_specimen,
+        seed=seed,
         noise=noise,
-        drift=False,
         spread=specimen_spread,
         protocol=protocol,
         repeats=repeats,
-    )
-    if added:
-        provenance["added"] = json.dumps({f"{test} {run}": sorted(signals) for (test, run), signals in added.items()})
-    return Dataset(
-        material=spec.data_material(),
-        geometry=VALIDATION_GEOMETRY,
-        conditions=spec.conditions(),
-        runs=_fill_optional(runs),
-        provenance=provenance,
+        added=added,
     )
 
 

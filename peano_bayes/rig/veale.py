@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Iterable, Mapping
-from functools import partial
 
 import jax
 import jax.numpy as jnp
@@ -21,11 +20,10 @@ from ..physics.reference import VEALE_TABLE2, veale_blocking_force, veale_force,
 from .measure import (
     _check_added,
     _check_run,
-    _checked,
-    _fill_optional,
+    _check_signals,
+    _other_physics_dataset,
     _other_physics_runs,
-    _provenance,
-    _sample_times,
+    _static_truths,
     _Truth,
 )
 from .protocol import DEFAULT_NOISE, DEFAULT_PROTOCOL, RigNoise, RigProtocol
@@ -66,30 +64,16 @@ _veale_blocking_force = jax.jit(veale_blocking_force)
 def _veale_truths(params, spec: MaterialSpec, protocol: RigProtocol, tests, cycle_pressures=None) -> list[_Truth]:
     """The noise-free signals of every test condition of one specimen of Veale's model, in session order; load
     cycles at ``cycle_pressures`` [Pa] (default: 0 and the test pressure)."""
-    p_test = spec.test_pressure_pa
-    slow = partial(_sample_times, protocol.quasi_static_rate_hz)
-    truths = []
-    if "load_cycle" in tests:
-        t = slow(protocol.cycle_duration_s)
-        for condition, p in enumerate((0.0, p_test) if cycle_pressures is None else cycle_pressures):
-            start = float(_veale_strain_at_force(p, spec.start_tension_n, params))
-            low = min(protocol.stretch_strain, start - protocol.min_stretch)
-            strain = np.interp(t, [0.0, 0.5 * t[-1], t[-1]], [start, low, start])
-            force = np.asarray(_veale_force(p, strain, params), dtype=float)
-            truths.append(_Truth("load_cycle", condition, t, np.full_like(t, p), strain, force))
-    if "blocking" in tests:
-        t = slow(protocol.ramp_duration_s)
-        ramp = p_test * t / t[-1]
-        force = np.asarray(_veale_blocking_force(ramp, params), dtype=float)
-        truths.append(_Truth("blocking", 0, t, ramp, np.zeros_like(t), force))
-    if "stroke" in tests:
-        t = slow(protocol.ramp_duration_s)
-        ramp = p_test * t / t[-1]
-        strain = np.asarray(_veale_strain_at_force(ramp, protocol.stroke_load_n, params), dtype=float)
-        truths.append(_Truth("stroke", 0, t, ramp, strain, load_n=protocol.stroke_load_n))
-    for truth in truths:  # a static model has no solver residual: only the signals are checked
-        signals = [x for x in (truth.strain, truth.force_n) if x is not None]
-        _checked(f"Veale's model, {truth.test} test", (signals, 0.0), 0.0, "")
+    truths = _static_truths(
+        lambda p, strain: _veale_force(p, strain, params),
+        lambda p, force: _veale_strain_at_force(p, force, params),
+        lambda p: _veale_blocking_force(p, params),
+        spec,
+        protocol,
+        tests,
+        cycle_pressures,
+    )
+    _check_signals("Veale's model", truths)
     return truths
 
 
@@ -155,31 +139,27 @@ def simulate_veale_dataset(
         repeats=repeats,
         added=added,
     )
-    provenance = _provenance(
-        source="synthetic: Veale's force-balance model (peano_bayes.rig.simulate_veale_dataset), not a "
-        "measurement and not peano_bayes' own physics",
-        seed=seed,
-        model={"model": "veale_force_balance", "parameters": json.dumps(base)},
-        per_specimen=per_specimen,
-        noise=noise,
-        drift=False,
-        spread=specimen_spread,
-        protocol=protocol,
-        repeats=repeats,
-    )
+    runs_note = None
     if cycle_pressures_pa is not None:
-        provenance["runs"] = "; ".join(
+        runs_note = "; ".join(
             f"load_cycle runs {c * repeats}-{(c + 1) * repeats - 1} at {p / 1e3:g} kPa"
             for c, p in enumerate(cycle_pressures_pa)
         )
-    if added:
-        provenance["added"] = json.dumps({f"{test} {run}": sorted(signals) for (test, run), signals in added.items()})
-    return Dataset(
-        material=spec.data_material(),
-        geometry=GEOMETRY,
-        conditions=spec.conditions(),
-        runs=_fill_optional(runs),
-        provenance=provenance,
+    return _other_physics_dataset(
+        spec,
+        GEOMETRY,
+        runs,
+        source="synthetic: Veale's force-balance model (peano_bayes.rig.simulate_veale_dataset), not a "
+        "measurement and not peano_bayes' own physics",
+        model={"model": "veale_force_balance", "parameters": json.dumps(base)},
+        per_specimen=per_specimen,
+        seed=seed,
+        noise=noise,
+        spread=specimen_spread,
+        protocol=protocol,
+        repeats=repeats,
+        added=added,
+        runs_note=runs_note,
     )
 
 
