@@ -137,6 +137,9 @@ def analyse(rows: list[dict]) -> dict:
             "unconverged": [f"{r['material']}/{r['seed']}" for r in mine if not r["converged"]],
             "errors": {f"{r['material']}/{r['seed']}": r["error"] for r in mine if r.get("error")},
             "median_seconds": float(np.median([r["seconds"] for r in mine])),
+            # A resumed fit's seconds are its last run's only; its steps are all it took, so they measure cost.
+            "median_steps": float(np.median([r["steps"] for r in mine])),
+            "steps_range": [int(min(r["steps"] for r in mine)), int(max(r["steps"] for r in mine))],
         }  # fmt: skip
     return out
 
