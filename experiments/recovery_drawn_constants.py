@@ -122,7 +122,15 @@ def _append(path: Path, row: dict) -> None:
     os.replace(tmp, path)
 
 
+def _share(rows: list[dict], keep) -> list[int]:
+    """[inside, scored] over the rows' scored values that ``keep(row, name)`` selects."""
+    picked = [p["inside"] for r in rows for n, p in r["parameters"].items() if keep(r, n)]
+    return [int(sum(picked)), len(picked)]
+
+
 def analyse(rows: list[dict]) -> dict:
+    from peano_bayes.inference.posterior import DEFAULT_HELD
+
     out = {}
     for arm in sorted({r["arm"] for r in rows}):
         mine = [r for r in rows if r["arm"] == arm]
@@ -133,6 +141,10 @@ def analyse(rows: list[dict]) -> dict:
                   if not p["inside"]]  # fmt: skip
         out[arm] = {
             "inside": inside, "total": total, "fraction": inside / total if total else None,
+            # where the values inside are (read after the pooled figure, not part of the registered target)
+            "by_material": {c: _share(counted, lambda r, n, c=c: r["material"] == c) for c in MATERIALS},
+            "shape_constants": _share(counted, lambda r, n: n in DEFAULT_HELD),
+            "physics": _share(counted, lambda r, n: n not in DEFAULT_HELD),
             "target_met": bool(total and inside / total >= TARGET), "misses": misses,
             "unconverged": [f"{r['material']}/{r['seed']}" for r in mine if not r["converged"]],
             "errors": {f"{r['material']}/{r['seed']}": r["error"] for r in mine if r.get("error")},
