@@ -128,6 +128,12 @@ def _share(rows: list[dict], keep) -> list[int]:
     return [int(sum(picked)), len(picked)]
 
 
+def _outside(scored: dict) -> float:
+    """How far a generating value lies outside its interval, in widths of the interval (0 inside)."""
+    low, high, truth = scored["low"], scored["high"], scored["truth"]
+    return max(low - truth, truth - high, 0.0) / (high - low)
+
+
 def analyse(rows: list[dict]) -> dict:
     from peano_bayes.inference.posterior import DEFAULT_HELD
 
@@ -146,6 +152,9 @@ def analyse(rows: list[dict]) -> dict:
             "shape_constants": _share(counted, lambda r, n: n in DEFAULT_HELD),
             "physics": _share(counted, lambda r, n: n not in DEFAULT_HELD),
             "target_met": bool(total and inside / total >= TARGET), "misses": misses,
+            # how far outside each miss lies, in widths of its interval (read after the pooled figure)
+            "miss_widths": {f"{r['material']}/{r['seed']}/{n}": round(_outside(p), 3) for r in counted
+                            for n, p in r["parameters"].items() if not p["inside"]},
             "unconverged": [f"{r['material']}/{r['seed']}" for r in mine if not r["converged"]],
             "errors": {f"{r['material']}/{r['seed']}": r["error"] for r in mine if r.get("error")},
             "median_seconds": float(np.median([r["seconds"] for r in mine])),
