@@ -128,10 +128,13 @@ def _share(rows: list[dict], keep) -> list[int]:
     return [int(sum(picked)), len(picked)]
 
 
-def _outside(scored: dict) -> float:
-    """How far a generating value lies outside its interval, in widths of the interval (0 inside)."""
+def _outside(scored: dict) -> float | None:
+    """How far a generating value lies outside its interval, in widths of the interval (0 inside); None where
+    that is not a finite number (a zero-width interval, a missing truth), so the JSON stays valid."""
     low, high, truth = scored["low"], scored["high"], scored["truth"]
-    return max(low - truth, truth - high, 0.0) / (high - low)
+    distance = max(low - truth, truth - high, 0.0)
+    ratio = distance / (high - low) if high > low else (0.0 if distance == 0 else np.inf)
+    return round(ratio, 3) if np.isfinite(ratio) else None
 
 
 def analyse(rows: list[dict]) -> dict:
@@ -141,6 +144,7 @@ def analyse(rows: list[dict]) -> dict:
     for arm in sorted({r["arm"] for r in rows}):
         mine = [r for r in rows if r["arm"] == arm]
         counted = [r for r in mine if r["converged"]]
+        ran = [r for r in mine if not r.get("error")]  # a rig that could not simulate ran no fit: no cost
         inside = sum(p["inside"] for r in counted for p in r["parameters"].values())
         total = sum(len(r["parameters"]) for r in counted)
         misses = [f"{r['material']}/{r['seed']}/{n}" for r in counted for n, p in r["parameters"].items()
@@ -153,14 +157,14 @@ def analyse(rows: list[dict]) -> dict:
             "physics": _share(counted, lambda r, n: n not in DEFAULT_HELD),
             "target_met": bool(total and inside / total >= TARGET), "misses": misses,
             # how far outside each miss lies, in widths of its interval (read after the pooled figure)
-            "miss_widths": {f"{r['material']}/{r['seed']}/{n}": round(_outside(p), 3) for r in counted
+            "miss_widths": {f"{r['material']}/{r['seed']}/{n}": _outside(p) for r in counted
                             for n, p in r["parameters"].items() if not p["inside"]},
             "unconverged": [f"{r['material']}/{r['seed']}" for r in mine if not r["converged"]],
             "errors": {f"{r['material']}/{r['seed']}": r["error"] for r in mine if r.get("error")},
-            "median_seconds": float(np.median([r["seconds"] for r in mine])),
+            "median_seconds": float(np.median([r["seconds"] for r in ran])) if ran else None,
             # A resumed fit's seconds are its last run's only; its steps are all it took, so they measure cost.
-            "median_steps": float(np.median([r["steps"] for r in mine])),
-            "steps_range": [int(min(r["steps"] for r in mine)), int(max(r["steps"] for r in mine))],
+            "median_steps": float(np.median([r["steps"] for r in ran])) if ran else None,
+            "steps_range": [int(min(r["steps"] for r in ran)), int(max(r["steps"] for r in ran))] if ran else None,
         }  # fmt: skip
     return out
 

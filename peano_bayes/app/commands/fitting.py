@@ -96,8 +96,8 @@ def _sampling_arguments(p, *, discover_by_default: bool = False, continued_by: s
     p.add_argument(
         "--sample-all",
         action="store_true",
-        help="also sample the shape constants held at nominal by default: intervals that allow for a muscle whose "
-        "constants differ, for about 1.7 times the steps (see docs/inference.md)",
+        help="also sample the shape constants held at nominal by default, for a muscle whose constants may differ "
+        "(about twice the time; see docs/inference.md)",
     )
     p.add_argument(
         "--discover",
