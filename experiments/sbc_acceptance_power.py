@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
+from peano_bayes.atomic import write_text
 from peano_bayes.validation.sbc import POOLED_BAND, RANK_ALPHA, RANK_DRAWS
 
 HERE = Path(__file__).resolve().parent
@@ -138,9 +139,7 @@ def main(argv=None) -> dict:
             f"detects one quantity whose 90 % interval covers {power}"
         )
     if args.out is not None:
-        tmp = args.out.with_name(args.out.name + ".tmp")
-        tmp.write_text(json.dumps(out, indent=1) + "\n")
-        tmp.replace(args.out)
+        write_text(args.out, json.dumps(out, indent=1) + "\n")
     print(json.dumps(out))
     return out
 
