@@ -281,6 +281,8 @@ def test_units_on_a_dask_cluster_survive_a_killed_worker_and_equal_a_serial_run(
     for test, q in summary["fit_quality_posterior_mean"].items():  # the fit's model discrepancy, beside its RMSE
         floor = q["noise_floor_rmse"]
         assert 0 < floor and q["excess_rmse"] == pytest.approx(np.sqrt(max(q["rmse"] ** 2 - floor**2, 0.0))), test
+    # where each sampled parameter's posterior sits in its prior is recorded for every one of them
+    assert set(summary["prior_z"]) == set(summary["contraction"]) and isinstance(summary["prior_conflicts"], list)
     # The result file: all six groups, provenance attrs, pointwise arrays aligned with the observed bins.
     idata = az.from_netcdf(serial_out / "TP" / "posterior.nc")
     for group in ("posterior", "sample_stats", "log_likelihood", "posterior_predictive", "observed_data", "prior"):

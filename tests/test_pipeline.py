@@ -173,3 +173,42 @@ def test_a_main_job_unit_reports_its_material_in_the_worker(tmp_path, monkeypatc
     assert calls == [(tmp_path / "TP", "TP", batch.REPORT_DRAWS)]
     batch._infer_unit("TP.csv", str(tmp_path), "TP", {"log": print})
     assert len(calls) == 1
+
+
+def test_a_posterior_far_in_a_tail_of_its_prior_is_placed_in_prior_sd_and_flagged_on_the_page():
+    """Known answers for where a value sits in its prior (prior sd), which positions count as a prior-data
+    conflict, and the results page that names them."""
+    from scipy import stats
+
+    from peano_bayes.inference import Prior, parse_entry
+    from peano_bayes.inference.results import PRIOR_CONFLICT_SD, prior_conflicts
+
+    def marginal(name, unit, **entry):
+        return parse_entry("test.toml", name, {"unit": unit, "provenance": "test", **entry})
+
+    lognormal = marginal("extension_k_n_per_m", "N/m", distribution="lognormal", median=320.0, sigma_log=2.3, high=1e5)
+    # a lognormal: the distance from the median in sigma_log, with the mass its cut at 1e5 removes accounted for
+    top = stats.norm.cdf(np.log(1e5 / 320.0) / 2.3)
+    expected = stats.norm.ppf(stats.norm.cdf(-4.0) / top)
+    assert lognormal.position(320.0 * np.exp(-4.0 * 2.3)) == pytest.approx(expected, abs=1e-9)
+    assert -4.0 < expected < -3.99  # the cut, 2.5 sd above the median, moves it by little
+    # a truncated normal: its own CDF (scipy's truncnorm), not the uncut normal's 0.5 at its mean
+    cut = marginal("length_fraction", "-", distribution="truncnormal", mean=0.7, sd=0.15, low=0.3, high=1.0)
+    expected = stats.norm.ppf(stats.truncnorm((0.3 - 0.7) / 0.15, (1.0 - 0.7) / 0.15, loc=0.7, scale=0.15).cdf(0.7))
+    assert cut.position(0.7) == pytest.approx(expected, abs=1e-12) and expected > 0.02  # uncut: 0
+    assert cut.position(1.0) == np.inf and cut.position(2.0) == np.inf  # on or past a bound: the end
+    half = marginal("noise_blocking_force_n", "N", distribution="halfnormal", scale=1.0)
+    assert half.position(1e-9) < -PRIOR_CONFLICT_SD  # near zero: its lower end, which is its mode ...
+    assert half.position(stats.halfnorm.ppf(stats.norm.cdf(3.5))) == pytest.approx(3.5, abs=1e-9)
+
+    marginals = {"extension_k_n_per_m": lognormal, "length_fraction": cut, "noise_blocking_force_n": half}
+    prior = Prior(tuple(marginals), marginals, {}, (), "", "test")
+    positions = {"extension_k_n_per_m": -4.0, "length_fraction": 2.9, "noise_blocking_force_n": -6.0}
+    assert prior_conflicts(prior, positions) == ["extension_k_n_per_m"]  # ... so not flagged there
+    high_noise = {**positions, "noise_blocking_force_n": 3.2}
+    assert prior_conflicts(prior, high_noise) == ["extension_k_n_per_m", "noise_blocking_force_n"]
+
+    summary = {**_summary(0.8), "prior_z": {"tensile_ka_n_per_m": -4.03}, "prior_conflicts": ["tensile_ka_n_per_m"]}
+    page = index_markdown([summary])
+    assert "**Prior and data disagree**" in page and "tensile_ka_n_per_m (-4.0 prior sd)" in page
+    assert "Prior and data disagree" not in index_markdown([_summary(0.8)])  # an older summary: none recorded

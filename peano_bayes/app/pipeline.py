@@ -51,9 +51,12 @@ from ..inference.priors import Prior
 from ..inference.reduce import Observations, prepare
 from ..inference.results import (
     NEW_SPECIMEN_PREFIX,
+    PRIOR_CONFLICT_SD,
     parameter_table,
     posterior_contraction,
     posterior_ridges,
+    prior_conflicts,
+    prior_positions,
     to_inference_data,
     write_netcdf,
 )
@@ -383,6 +386,16 @@ def infer(
                 + ("" if conv.converged else "; the run has not converged, so its mean may not be a fit yet")
                 + "; 'peano-bayes metrics' adds its misfit beyond the sensor noise to the metrics read off it"
             )
+    positions = prior_positions(idata, posterior.prior, posterior.prior.names)
+    conflicts = prior_conflicts(posterior.prior, positions)
+    if conflicts:
+        log(
+            f"{code}: WARNING: the posterior median lies more than {PRIOR_CONFLICT_SD:g} prior sd into a tail of "
+            "its prior for "
+            + ", ".join(f"{n} ({positions[n]:+.1f})" for n in conflicts)
+            + ": prior and data disagree there, and along any direction the data leave open the interval "
+            "follows the prior; check the prior file's entry"
+        )
     summary = Summary(**{
         "material": code,
         "label": out.name,
@@ -422,6 +435,8 @@ def infer(
         if posterior.varying
         else {},
         "contraction": posterior_contraction(idata, posterior.prior.names),
+        "prior_z": positions,
+        "prior_conflicts": conflicts,
         "ridges": posterior_ridges(idata, posterior.prior.names),
         "units": posterior.units,
         "fixed": posterior.fixed,

@@ -146,6 +146,28 @@ class Marginal:
         """Median of the truncated prior [SI]."""
         return float(self.quantile(0.5))
 
+    def position(self, x) -> np.ndarray:
+        """Where ``x`` [SI] sits in this truncated prior, in prior sd [-] (any shape, NumPy).
+
+        The standard-normal score of the prior's own CDF at ``x``: 0 at the prior median, -2 and +2 where a
+        normal prior has its 2.3 % and 97.7 % quantiles, whatever the distribution (for a lognormal it is the
+        distance from the median in sigma_log; for a truncated prior the truncation is accounted for). The
+        support's ends map to -inf and +inf; values beyond them are clipped onto them.
+        """
+        c_low, c_high = self._cdf(self.low), self._cdf(self.high)
+        x = np.clip(np.asarray(x, dtype=float), self.low, self.high)
+        q = np.clip((self._cdf(x) - c_low) / (c_high - c_low), 0.0, 1.0)
+        return special.ndtri(q)
+
+    def in_tail(self, z, sd: float) -> np.ndarray:
+        """True where a position ``z`` [prior sd] (:meth:`position`) lies more than ``sd`` into a tail of this prior.
+
+        A halfnormal's lower end is its mode, not a tail, so only its upper end counts."""
+        z = np.asarray(z, dtype=float)
+        if self.distribution == "halfnormal":
+            return z > sd
+        return np.abs(z) > sd
+
     def sample(self, rng: np.random.Generator, n: int) -> np.ndarray:
         """``n`` draws [SI], shape (n,), strictly inside the support (inverse-CDF sampling)."""
         q = rng.uniform(1e-12, 1.0 - 1e-12, size=n)

@@ -33,7 +33,10 @@ class Summary(Mapping):
     (:meth:`~peano_bayes.inference.diagnostics.Convergence.as_dict`, with ``converged``); ``min_ess_per_s``.
     **Posterior:** ``parameters`` name -> mean, sd, 94 % HDI [SI]; ``hierarchy`` the specimens and varying
     parameters; ``new_specimen`` the predictive of a specimen not yet made; ``contraction`` posterior sd over
-    prior sd's complement; ``ridges`` strongly correlated combinations; ``units``; ``fixed`` held values.
+    prior sd's complement; ``prior_z`` where each posterior median sits in its prior, in prior sd
+    (:func:`~peano_bayes.inference.results.prior_positions`); ``prior_conflicts`` the parameters whose median lies
+    beyond :data:`~peano_bayes.inference.results.PRIOR_CONFLICT_SD` of them in a tail, where prior and data
+    disagree; ``ridges`` strongly correlated combinations; ``units``; ``fixed`` held values.
     **Fit:** ``fit_quality_least_squares`` and ``fit_quality_posterior_mean`` per test (RMSE, R^2, excess over
     the noise floor); ``residual_correlation`` per test; ``least_squares`` (``fit.json``'s outcome);
     ``posterior_mode`` (log posterior, steps, status codes of :class:`~peano_bayes.inference.status.ModeStatus`);
@@ -64,6 +67,8 @@ class Summary(Mapping):
     hierarchy: dict = field(default_factory=dict)
     new_specimen: dict = field(default_factory=dict)
     contraction: dict = field(default_factory=dict)
+    prior_z: dict = field(default_factory=dict)
+    prior_conflicts: list = field(default_factory=list)
     ridges: list = field(default_factory=list)
     fixed: dict = field(default_factory=dict)
     fit_quality_least_squares: dict = field(default_factory=dict)

@@ -20,6 +20,20 @@ DISCOVERY_FOLDER = "discovery"
 WEAKLY_INFORMED = 0.5
 
 
+def prior_conflict_lines(conflicts: list, positions: dict) -> list[str]:
+    """``index.md`` lines naming the parameters whose posterior median lies far in a tail of its prior
+    (``summary.json``'s ``prior_conflicts``, positions in prior sd from ``prior_z``); none if there are none."""
+    if not conflicts:
+        return []
+    named = ", ".join(f"{n} ({positions[n]:+.1f} prior sd)" if n in positions else n for n in conflicts)
+    return [
+        "",
+        f"**Prior and data disagree**: the posterior median lies far in a tail of the prior for {named}. Along "
+        "any direction the fitted tests leave open (a ridge) the interval follows the prior, so it may not hold "
+        "the value 94 % of the time; check that prior's entry and its provenance.",
+    ]
+
+
 def held_lines(fixed: dict, tests=()) -> list[str]:
     """``index.md`` lines naming the model parameters a fit held instead of sampling (``summary.json``'s
     ``fixed``, SI units as in their names), but for the step-only parameters of a fit without the step test
@@ -214,6 +228,7 @@ def index_markdown(
                 f"**Posterior close to its prior** (contraction below {WEAKLY_INFORMED:g}): {', '.join(weak)}. "
                 "The fitted tests say little about these; their intervals are mostly the prior's.",
             ]
+        lines += prior_conflict_lines(s.get("prior_conflicts", []), s.get("prior_z", {}))
         lines += ridge_lines(s.get("ridges", []))
         lines += held_lines(s.get("fixed", {}), s["tests"])
         correlation = s.get("residual_correlation", {})
