@@ -30,6 +30,11 @@ a new machine and a fit's resume state (gitignored, 70-200 MB) does not outlive 
 session never finishes; FC 7101 held was at 8700 steps after 75 minutes of one core, its tau_max 708 and growing,
 R-hat 1.38. A fit that reaches the cap is unconverged: listed, not scored, as any unconverged fit.
 
+Registered again 2026-12-07 (docs/validation.md, "The extension stiffness prior, revised"), after the bundled
+extension stiffness priors were revised: arm ``sampled`` only (``--arms sampled``), seeds 7201, 7202 and 7203
+(``--seeds``; fresh), the same materials, cap, scoring and target, its own folder
+(``experiments/recovery-revised-prior``).
+
 Each finished fit appends one JSON row to ``DIR/rows.jsonl`` (atomically: the row is written whole or not at
 all); a restarted run skips the rows present, so the study may span sessions. ``--analyse`` reads the rows and
 prints the pooled figures, the last line one JSON object; it refuses while rows are missing.
@@ -42,7 +47,7 @@ import json
 import multiprocessing
 import os
 import sys
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 import numpy as np
@@ -173,6 +178,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", required=True, type=Path, help="the study's folder (rows.jsonl, data, fits)")
     parser.add_argument("--arms", nargs="+", choices=ARMS, default=list(ARMS))
+    parser.add_argument("--seeds", nargs="+", type=int, default=list(SEEDS), help="dataset seeds (registered)")
     parser.add_argument("--jobs", type=int, default=1, help="fits at once (one core each)")
     parser.add_argument("--analyse", action="store_true", help="analyse the rows (all must be in)")
     args = parser.parse_args()
@@ -180,12 +186,12 @@ def main() -> int:
     rows_path = args.out / "rows.jsonl"
     rows = [json.loads(line) for line in rows_path.read_text().splitlines()] if rows_path.exists() else []
     done = {(r["material"], r["seed"], r["arm"]) for r in rows}
-    plan = [(c, s, a) for a in args.arms for c in MATERIALS for s in SEEDS if (c, s, a) not in done]
+    plan = [(c, s, a) for a in args.arms for c in MATERIALS for s in args.seeds if (c, s, a) not in done]
     if args.analyse:
         if plan:
             print(f"{len(plan)} rows missing: {plan}", file=sys.stderr)
             return 2
-        result = analyse([r for r in rows if r["arm"] in args.arms])
+        result = analyse([r for r in rows if r["arm"] in args.arms and r["seed"] in args.seeds])
         for arm, r in result.items():
             share = "no converged fit" if r["fraction"] is None else f"{r['fraction']:.3f}"
             print(f"{arm}: {r['inside']} of {r['total']} inside ({share}); misses {r['misses']}")
@@ -195,8 +201,8 @@ def main() -> int:
 
     def record(key, row):
         _append(rows_path, row)
-        inside = sum(p["inside"] for p in row["parameters"].values())
-        print(f"row {key}: {inside} of {len(row['parameters'])} inside, converged {row['converged']}", flush=True)
+        # no outcome here: the registered analysis reads the rows once, when all are in
+        print(f"row {key}: recorded ({row['steps']} steps)", flush=True)
 
     if args.jobs == 1:  # in this process: nothing to fork
         for key in plan:
@@ -206,8 +212,8 @@ def main() -> int:
     # multithreaded JAX process can deadlock (one did, at its first least squares).
     with ProcessPoolExecutor(max_workers=args.jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
         futures = {pool.submit(run_row, c, s, a, str(args.out)): (c, s, a) for c, s, a in plan}
-        for future, key in futures.items():
-            record(key, future.result())
+        for future in as_completed(futures):  # each row as soon as its fit ends, not in submission order
+            record(futures[future], future.result())
     return 0
 
 
