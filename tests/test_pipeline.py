@@ -200,6 +200,7 @@ def test_a_posterior_far_in_a_tail_of_its_prior_is_placed_in_prior_sd_and_flagge
     half = marginal("noise_blocking_force_n", "N", distribution="halfnormal", scale=1.0)
     assert half.position(1e-9) < -PRIOR_CONFLICT_SD  # near zero: its lower end, which is its mode ...
     assert half.position(stats.halfnorm.ppf(stats.norm.cdf(3.5))) == pytest.approx(3.5, abs=1e-9)
+    assert half.position(9.0) == pytest.approx(stats.norm.isf(stats.halfnorm.sf(9.0)), rel=1e-9)  # far out: finite
 
     marginals = {"extension_k_n_per_m": lognormal, "length_fraction": cut, "noise_blocking_force_n": half}
     prior = Prior(tuple(marginals), marginals, {}, (), "", "test")

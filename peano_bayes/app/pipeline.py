@@ -391,7 +391,7 @@ def infer(
     if conflicts:
         log(
             f"{code}: WARNING: the posterior median lies more than {PRIOR_CONFLICT_SD:g} prior sd into a tail of "
-            "its prior for "
+            "its prior, or against a bound of its support, for "
             + ", ".join(f"{n} ({positions[n]:+.1f})" for n in conflicts)
             + ": prior and data disagree there, and along any direction the data leave open the interval "
             "follows the prior; check the prior file's entry"

@@ -122,6 +122,19 @@ class Marginal:
             return np.clip(np.log(x / self.low) / math.log(self.high / self.low), 0.0, 1.0)
         return np.clip((x - self.low) / (self.high - self.low), 0.0, 1.0)  # uniform
 
+    def _sf(self, x: np.ndarray) -> np.ndarray:
+        """1 - CDF of the *untruncated* distribution at x [SI], accurate far into the upper tail."""
+        x = np.asarray(x, dtype=float)
+        d = self.distribution
+        if d == "lognormal":
+            with np.errstate(divide="ignore"):
+                return special.ndtr(-(np.log(x) - self.loc) / self.scale)
+        if d in ("normal", "truncnormal"):
+            return special.ndtr(-(x - self.loc) / self.scale)
+        if d == "halfnormal":
+            return 2.0 * special.ndtr(-np.maximum(x, 0.0) / self.scale)
+        return 1.0 - self._cdf(x)  # the uniform families: no tail to lose
+
     def _ppf(self, q: np.ndarray) -> np.ndarray:
         """Inverse CDF of the *untruncated* distribution, q in [0, 1]."""
         q = np.asarray(q, dtype=float)
@@ -151,18 +164,22 @@ class Marginal:
 
         The standard-normal score of the prior's own CDF at ``x``: 0 at the prior median, -2 and +2 where a
         normal prior has its 2.3 % and 97.7 % quantiles, whatever the distribution (for a lognormal it is the
-        distance from the median in sigma_log; for a truncated prior the truncation is accounted for). The
-        support's ends map to -inf and +inf; values beyond them are clipped onto them.
+        distance from the median in sigma_log; for a truncated prior the truncation is accounted for). The upper
+        half is read from the tail's own mass, so it stays finite far out. The support's ends map to -inf and
+        +inf; values beyond them are clipped onto them.
         """
         c_low, c_high = self._cdf(self.low), self._cdf(self.high)
         x = np.clip(np.asarray(x, dtype=float), self.low, self.high)
-        q = np.clip((self._cdf(x) - c_low) / (c_high - c_low), 0.0, 1.0)
-        return special.ndtri(q)
+        below = np.clip((self._cdf(x) - c_low) / (c_high - c_low), 0.0, 1.0)
+        above = np.clip((self._sf(x) - self._sf(self.high)) / (c_high - c_low), 0.0, 1.0)  # the upper tail's mass
+        return np.where(below < 0.5, special.ndtri(below), -special.ndtri(above))
 
     def in_tail(self, z, sd: float) -> np.ndarray:
         """True where a position ``z`` [prior sd] (:meth:`position`) lies more than ``sd`` into a tail of this prior.
 
-        A halfnormal's lower end is its mode, not a tail, so only its upper end counts."""
+        A halfnormal's lower end is its mode, not a tail, so only its upper end counts. For a (log)uniform prior,
+        which has no tails, a position this far out means a value pressed against a bound of its support: the
+        data ask for values the prior excludes, a conflict of the same kind."""
         z = np.asarray(z, dtype=float)
         if self.distribution == "halfnormal":
             return z > sd

@@ -28,7 +28,8 @@ def prior_conflict_lines(conflicts: list, positions: dict) -> list[str]:
     named = ", ".join(f"{n} ({positions[n]:+.1f} prior sd)" if n in positions else n for n in conflicts)
     return [
         "",
-        f"**Prior and data disagree**: the posterior median lies far in a tail of the prior for {named}. Along "
+        f"**Prior and data disagree**: the posterior median lies far in a tail of the prior (or against a bound "
+        f"of its support) for {named}. Along "
         "any direction the fitted tests leave open (a ridge) the interval follows the prior, so it may not hold "
         "the value 94 % of the time; check that prior's entry and its provenance.",
     ]
