@@ -3,6 +3,7 @@ the exit status of each outcome (0, 1, 2, 3, 130), a prior of one's own (prior n
 
 from __future__ import annotations
 
+import inspect
 import json
 import subprocess
 import sys
@@ -17,6 +18,7 @@ from peano_bayes.app import pipeline
 from peano_bayes.app.cli import main
 from peano_bayes.app.commands import COMMANDS
 from peano_bayes.data import load, save
+from peano_bayes.defaults import DEFAULT_SAMPLE_ALL
 from peano_bayes.errors import PeanoBayesInputError
 from peano_bayes.inference.prior_files import load_prior
 from peano_bayes.inference.sample import SamplingInterrupted
@@ -112,9 +114,29 @@ def test_a_fit_says_which_shape_constants_it_holds(tmp_path, monkeypatch, sample
     with pytest.raises(RuntimeError, match="stopped before"):
         pipeline.infer(load(bundled.dataset_path("TP")), tmp_path / "out", log=lines.append, sample_all=sample_all)
     (line,) = [line for line in lines if "parameters sampled" in line]
-    held = "; shape constants held, not sampled: length_fraction = 0.8, bending_exponent = 6, extension_rate = 50"
+    held = (
+        "; shape constants held at nominal, not sampled: length_fraction = 0.8, bending_exponent = 6, "
+        "extension_rate = 50"
+    )
     assert ("shape constants held" in line) is not sample_all, line
     assert sample_all or (held in line and line.endswith("(--sample-all samples them)")), line
+
+
+@pytest.mark.parametrize(
+    "flag, sampled", [([], DEFAULT_SAMPLE_ALL), (["--sample-all"], True), (["--no-sample-all"], False)]
+)
+def test_fit_samples_the_shape_constants_as_told_else_by_default(own_muscle, tmp_path, monkeypatch, flag, sampled):
+    """The command line and the Python API share one default, :data:`~peano_bayes.defaults.DEFAULT_SAMPLE_ALL`."""
+    assert inspect.signature(pipeline.infer).parameters["sample_all"].default is DEFAULT_SAMPLE_ALL
+    seen = []
+
+    def infer(data, out_dir, **kwargs):
+        seen.append(kwargs["sample_all"])
+        return _fake_infer(True)(data, out_dir, **kwargs)
+
+    monkeypatch.setattr(pipeline, "infer", infer)
+    assert main(["fit", str(own_muscle), "--out", str(tmp_path / "out"), "--prior", "TPC", *flag]) == 0
+    assert seen == [sampled]
 
 
 def test_fit_of_an_unknown_material_without_a_prior_names_the_option(own_muscle, tmp_path, capsys):

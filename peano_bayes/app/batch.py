@@ -16,6 +16,7 @@ from ..data import Dataset, load
 from ..defaults import (
     DEFAULT_DRAWS,
     DEFAULT_MAX_STEPS,
+    DEFAULT_SAMPLE_ALL,
     DEFAULT_TESTS,
 )
 from ..errors import PeanoBayesError, PeanoBayesInputError
@@ -253,7 +254,7 @@ def _check_inputs(dataset: Dataset, kwargs: dict) -> None:
     selected = select_tests(dataset, kwargs.get("tests", DEFAULT_TESTS))
     whole_prior = prior_of(selected, kwargs.get("prior"))
     if kwargs.get("n_walkers") is not None:
-        sample_all = bool(kwargs.get("sample_all"))
+        sample_all = bool(kwargs.get("sample_all", DEFAULT_SAMPLE_ALL))
         _plan_posterior(selected, whole_prior, whole_prior.config, sample_all=sample_all, n_walkers=kwargs["n_walkers"])
 
 

@@ -27,6 +27,7 @@ from ..defaults import (
     DEFAULT_COORDINATES,
     DEFAULT_ENSEMBLES,
     DEFAULT_MAX_STEPS,
+    DEFAULT_SAMPLE_ALL,
     DEFAULT_STARTS,
     DEFAULT_TESTS,
     DEFAULT_WARMUP,
@@ -205,7 +206,7 @@ def infer(
     warmup: int = DEFAULT_WARMUP,
     min_steps: int = 0,
     progress: bool = True,
-    sample_all: bool = False,
+    sample_all: bool = DEFAULT_SAMPLE_ALL,
     prior: str | Path | None = None,
     label: str | None = None,
     figures: bool = True,
@@ -226,8 +227,9 @@ def infer(
     likelihood (:func:`~peano_bayes.inference.laplace.refine_mode`); sampling runs ``warmup`` steps of warm-up, then
     chunks of at most ``chunk`` steps until converged or ``max_steps``, and at least ``min_steps`` in all (see
     :func:`~peano_bayes.inference.sample.sample`). ``resume`` continues an interrupted run.
-    ``sample_all`` also samples the shape constants held by default
-    (:data:`~peano_bayes.inference.posterior.DEFAULT_HELD`). ``discover``: first run discovery on the data
+    ``sample_all``: sample the three shape constants of :data:`~peano_bayes.inference.posterior.DEFAULT_HELD`
+    too, or (``False``) hold them at nominal (default
+    :data:`~peano_bayes.defaults.DEFAULT_SAMPLE_ALL`). ``discover``: first run discovery on the data
     from the material's configured model, write its report into ``<label>/discovery/`` and sample the
     configured model plus the physics effects it named (:func:`~peano_bayes.discovery.choice.choose_model`; a
     resumed run reads the report instead of running discovery again). ``summary.json``'s ``model`` records the
@@ -287,11 +289,12 @@ def infer(
         choice = dataclasses.replace(choice, config=plan.config)
     config, prior, observations, posterior, n_walkers = plan
     held = [f"{name} = {posterior.fixed[name]:g}" for name in DEFAULT_HELD if name in posterior.fixed]
+    held_note = f"; shape constants held at nominal, not sampled: {', '.join(held)} (--sample-all samples them)"
     out.mkdir(parents=True, exist_ok=True)
     log(
         f"{code}: {observations.n_bins} bins from {len(dataset.runs)} runs ({', '.join(dataset.tests)}); "
         f"{posterior.ndim} parameters sampled"
-        + (f"; shape constants held, not sampled: {', '.join(held)} (--sample-all samples them)" if held else "")
+        + (held_note if held else "")
     )
     if fitted is None:
         fitted = fit_plan(plan)

@@ -40,8 +40,8 @@ def held_lines(fixed: dict, tests=()) -> list[str]:
     ``fixed``, SI units as in their names), but for the step-only parameters of a fit without the step test
     (``tests``: the fitted tests), which the step metrics draw from the prior: every interval of the result is
     conditional on these values. The shape constants of :data:`~peano_bayes.inference.posterior.DEFAULT_HELD`
-    are held at nominal unless ``--sample-all``; where a muscle's differ, intervals that hold them can sit far from
-    the truth."""
+    are held at nominal with ``--no-sample-all``; where a muscle's differ, intervals that hold them can sit far
+    from the truth."""
     fixed = {k: v for k, v in fixed.items() if "step" in tests or k not in STEP_ONLY_PARAMETERS}
     if not fixed:
         return []
@@ -50,9 +50,9 @@ def held_lines(fixed: dict, tests=()) -> list[str]:
     shape = [name for name in DEFAULT_HELD if name in fixed]
     if shape:
         line += (
-            f" The shape constants ({', '.join(shape)}) are held at nominal by default: on a muscle whose "
-            "constants differ, intervals that hold them can sit far from the truth; `--sample-all` samples them, "
-            "for about twice the time (docs/validation.md, drawn constants)."
+            f" The shape constants ({', '.join(shape)}) were held at nominal: on a muscle whose constants "
+            "differ, intervals that hold them can sit far from the truth; `--sample-all` samples them, for "
+            "about twice the time (docs/validation.md, drawn constants)."
         )
     return ["", line]
 

@@ -19,6 +19,7 @@ from ...defaults import (
     DEFAULT_ENSEMBLES,
     DEFAULT_MAX_STEPS,
     DEFAULT_MAX_WARMUP,
+    DEFAULT_SAMPLE_ALL,
     DEFAULT_STARTS,
     DEFAULT_TESTS,
     DEFAULT_WARMUP,
@@ -95,9 +96,11 @@ def _sampling_arguments(p, *, discover_by_default: bool = False, continued_by: s
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.add_argument(
         "--sample-all",
-        action="store_true",
-        help="also sample the shape constants held at nominal by default, for a muscle whose constants may differ "
-        "(about twice the time; see docs/inference.md)",
+        action=argparse.BooleanOptionalAction,
+        default=DEFAULT_SAMPLE_ALL,
+        help="sample the three shape constants (length fraction, bending exponent, extension rate) with the rest, "
+        "for a muscle whose constants may differ from nominal, in about twice the time; --no-sample-all holds them "
+        f"at nominal (default: {'--sample-all' if DEFAULT_SAMPLE_ALL else '--no-sample-all'}; see docs/inference.md)",
     )
     p.add_argument(
         "--discover",
