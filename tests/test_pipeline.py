@@ -67,7 +67,7 @@ def test_results_page_shows_population_new_specimen_and_weakly_informed_paramete
     fixed = {"length_fraction": 0.8, "friction_force_n": 1.5, "orifice_area_m2": 5e-06}
     held = index_markdown([{**_summary(0.8), "fixed": fixed}])
     assert "**Held, not sampled** (every interval here is conditional on these values): length_fraction = 0.8, " in held
-    assert "friction_force_n = 1.5." in held and "The shape constants (length_fraction) are held" in held
+    assert "friction_force_n = 1.5." in held and "The shape constants (length_fraction) were held at nominal" in held
     assert "orifice_area_m2" not in held  # step-only, not fitted: the step metrics draw it from the prior
     with_step = index_markdown([{**_summary(0.8), "tests": ["load_cycle", "step"], "fixed": fixed}])
     assert "friction_force_n = 1.5, orifice_area_m2 = 5e-06." in with_step
