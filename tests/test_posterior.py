@@ -202,7 +202,7 @@ def test_excess_over_the_sensor_noise_measures_a_missing_offset_and_not_the_nois
 def test_batches_in_fixed_rows_equal_one_call_and_compile_once(stroke_data):
     """with_batch_rows pads and splits any batch into calls of one size: the same values as one call per
     batch, one compiled program for every batch size. (24 rows in one call, as in
-    ``test_log_posterior_is_finite_or_minus_inf_never_nan``: that program is compiled once for both.)"""
+    ``test_log_posterior_is_finite_or_minus_inf_never_nan``, so the suite's compilation cache serves both.)"""
     post = build_posterior(prepare(stroke_data), prior_for("TP"))
     rng = np.random.default_rng(3)
     theta = np.zeros((24, post.ndim))
@@ -223,8 +223,8 @@ def test_batches_in_fixed_rows_equal_one_call_and_compile_once(stroke_data):
 
 def test_compiled_functions_are_shared_with_new_data_only(stroke_data):
     """with_observations reuses the compiled log posterior on other data of the protocol; any other change
-    (here the likelihood family) gets its own, so it never evaluates the old posterior. (In rows of 3, the
-    program ``test_batches_in_fixed_rows_equal_one_call_and_compile_once`` compiles.)"""
+    (here the likelihood family) gets its own, so it never evaluates the old posterior. (In rows of 3, as
+    ``test_batches_in_fixed_rows_equal_one_call_and_compile_once``, so the compilation cache serves both.)"""
     import dataclasses
 
     post = build_posterior(prepare(stroke_data), prior_for("TP")).with_batch_rows(3)

@@ -289,12 +289,13 @@ def infer(
         choice = dataclasses.replace(choice, config=plan.config)
     config, prior, observations, posterior, n_walkers = plan
     held = [f"{name} = {posterior.fixed[name]:g}" for name in DEFAULT_HELD if name in posterior.fixed]
-    held_note = f"; shape constants held at nominal, not sampled: {', '.join(held)} (--sample-all samples them)"
+    held_note = (
+        f"; shape constants held at nominal, not sampled: {', '.join(held)} (--sample-all samples them)" if held else ""
+    )
     out.mkdir(parents=True, exist_ok=True)
     log(
         f"{code}: {observations.n_bins} bins from {len(dataset.runs)} runs ({', '.join(dataset.tests)}); "
-        f"{posterior.ndim} parameters sampled"
-        + (held_note if held else "")
+        f"{posterior.ndim} parameters sampled{held_note}"
     )
     if fitted is None:
         fitted = fit_plan(plan)
