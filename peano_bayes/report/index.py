@@ -51,8 +51,8 @@ def held_lines(fixed: dict, tests=()) -> list[str]:
     if shape:
         line += (
             f" The shape constants ({', '.join(shape)}) were held at nominal: on a muscle whose constants "
-            "differ, intervals that hold them can sit far from the truth; `--sample-all` samples them, for "
-            "about twice the time (docs/validation.md, drawn constants)."
+            "differ, intervals that hold them can sit far from the truth; `--sample-all` (the default) samples "
+            "them, for about 1.6-2 times the time (docs/validation.md, drawn constants)."
         )
     return ["", line]
 
