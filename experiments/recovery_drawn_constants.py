@@ -6,12 +6,13 @@ act on, item 5).
 
 Pre-registered (written before any row existed): materials TP, PR, PC and FC; seeds 7101, 7102 and 7103 each
 (fresh: no dataset, fit or study used them). Per (material, seed): the material's generating parameters
-(``true_parameters.toml``) with the three shape constants a fit holds by default (``length_fraction``,
-``bending_exponent``, ``extension_rate``: :data:`~peano_bayes.inference.posterior.DEFAULT_HELD`, where the
-material's model reads them) replaced by one draw each from the material's own prior (the draw's generator is
+(``true_parameters.toml``) with the three shape constants a fit held by default when this was registered
+(``length_fraction``, ``bending_exponent``, ``extension_rate``: :data:`~peano_bayes.inference.posterior.DEFAULT_HELD`,
+where the material's model reads them; sampled by default since 2026-12-07, and the arms pass ``sample_all``
+explicitly) replaced by one draw each from the material's own prior (the draw's generator is
 seeded by the seed), data from the virtual rig as the bundled files were made (two specimens, three repeats, the
 four tests, the bundled noise), then ``fit`` as a user runs it: the defaults (the three quasi-static tests, the
-bundled prior of the material), no discovery. Arm ``held``: the default fit, constants held at nominal. Arm
+bundled prior of the material), no discovery. Arm ``held``: the default fit then, constants held at nominal. Arm
 ``sampled``: ``--sample-all``, the constants sampled too. Scored: every population physics parameter the fit
 sampled (not noise scales, the spread or contrasts; in ``sampled`` also the constants themselves), inside its
 94 % HDI or not; only converged fits count, unconverged ones are listed. Target: >= 90 % of the population

@@ -50,9 +50,10 @@ def held_lines(fixed: dict, tests=()) -> list[str]:
     shape = [name for name in DEFAULT_HELD if name in fixed]
     if shape:
         line += (
-            f" The shape constants ({', '.join(shape)}) were held at nominal: on a muscle whose constants "
-            "differ, intervals that hold them can sit far from the truth; `--sample-all` (the default) samples "
-            "them, for about 1.6-2 times the time (docs/validation.md, drawn constants)."
+            f" The shape constants ({', '.join(shape)}) were held at nominal (`--no-sample-all`): on a muscle "
+            "whose constants differ, intervals that hold them can sit far from the truth; the default, "
+            "`--sample-all`, samples them, for about 1.6-2 times the time (docs/validation.md, recovery with "
+            "the constants sampled)."
         )
     return ["", line]
 

@@ -99,8 +99,8 @@ def _sampling_arguments(p, *, discover_by_default: bool = False, continued_by: s
         action=argparse.BooleanOptionalAction,
         default=DEFAULT_SAMPLE_ALL,
         help="sample the three shape constants (length fraction, bending exponent, extension rate) with the rest, "
-        "as a muscle whose constants may differ from nominal needs; --no-sample-all holds them at nominal, exact "
-        "only where they are, in about half to two thirds of the time "
+        "as needed unless a muscle's constants are known to be nominal; --no-sample-all holds them at nominal "
+        "(exact only for such a muscle), in about half to two thirds of the time "
         f"(default: {'--sample-all' if DEFAULT_SAMPLE_ALL else '--no-sample-all'}; see docs/inference.md)",
     )
     p.add_argument(
