@@ -14,6 +14,10 @@ without a
 summary (the run failed) is reported as missing. The last line is one JSON object with both runs and, when
 both ran, the ratio of their wall times (reference / ours). ``--keep DIR`` keeps the result folders.
 
+A run stopped part way (its process ended) continues with ``--resume /tmp/bench_main_job_XXXX`` (the same
+materials and options): ``peano-bayes run`` picks up in the same clone, cache and results, and the wall time is
+the sum of the parts the results' ``run.log`` records (``parts`` in the JSON).
+
 Both runs take the machine for most of an hour; to keep them apart but on the same day, measure the reference
 first with ``--ref REF --save-json REF.json`` and later pass ``--reference-json REF.json`` to the run of HEAD.
 """
@@ -21,6 +25,8 @@ first with ``--ref REF --save-json REF.json`` and later pass ``--reference-json 
 from __future__ import annotations
 
 import argparse
+import calendar
+import contextlib
 import json
 import os
 import shutil
@@ -51,12 +57,45 @@ def material_figures(summary: dict) -> dict:
     }
 
 
-def run_at(ref: str, materials, options: list[str], keep: Path | None) -> dict:
-    """Clone ``ref`` into a temporary folder, run the main job there, and collect its figures."""
-    with tempfile.TemporaryDirectory(prefix="bench_main_job_") as tmp:
-        clone = Path(tmp) / "clone"
-        subprocess.run(["git", "clone", "--quiet", "--no-hardlinks", str(REPO), str(clone)], check=True)
-        subprocess.run(["git", "-C", str(clone), "checkout", "--quiet", ref], check=True)
+def wall_parts(run_log: Path) -> list[dict]:
+    """The invocations recorded in a main job's ``run.log``: each part begins at its ``running N dataset(s)``
+    line and ends at its last line before the next part began (or the file's last line), timestamps to the
+    second. A part that was stopped ends at its last logged line, so its wall is short by up to one log interval
+    (a sampling check, a few minutes at most)."""
+    stamps: list[tuple[float, str]] = []
+    for line in run_log.read_text().splitlines():
+        stamp, _, text = line.partition(" ")
+        try:
+            stamps.append((calendar.timegm(time.strptime(stamp, "%Y-%m-%dT%H:%M:%SZ")), text))
+        except ValueError:
+            continue  # a continuation line of a multi-line message
+    starts = [i for i, (_, text) in enumerate(stamps) if text.startswith("running ") and "dataset(s)" in text]
+    # an invocation's own lines before its "running" line (materials skipped or resumed) start the next part
+    opening = ("exists, skipped", "resuming with a larger step limit")
+    parts = []
+    for n, i in enumerate(starts):
+        last = (starts[n + 1] if n + 1 < len(starts) else len(stamps)) - 1
+        while n + 1 < len(starts) and last > i and any(k in stamps[last][1] for k in opening):
+            last -= 1
+        parts.append({"start_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(stamps[i][0])),
+                      "wall_s": stamps[last][0] - stamps[i][0]})  # fmt: skip
+    return parts
+
+
+def run_at(ref: str, materials, options: list[str], keep: Path | None, resume: Path | None = None) -> dict:
+    """Clone ``ref`` into a temporary folder, run the main job there, and collect its figures. With ``resume``
+    (the folder of an earlier, stopped run of this script: its ``clone``, ``cache`` and ``results``) the job
+    continues there instead, and the wall time is the sum of the parts its ``run.log`` records."""
+    with contextlib.ExitStack() as stack:
+        if resume is None:
+            tmp = stack.enter_context(tempfile.TemporaryDirectory(prefix="bench_main_job_"))
+            clone = Path(tmp) / "clone"
+            subprocess.run(["git", "clone", "--quiet", "--no-hardlinks", str(REPO), str(clone)], check=True)
+            subprocess.run(["git", "-C", str(clone), "checkout", "--quiet", ref], check=True)
+        else:
+            tmp, clone = str(resume), resume / "clone"
+            if not (clone / ".git").exists() or not (resume / "results" / "run.log").exists():
+                raise SystemExit(f"--resume {resume}: expected an earlier run's clone/ and results/run.log there")
         commit = subprocess.run(
             ["git", "-C", str(clone), "rev-parse", "--short", "HEAD"], check=True, capture_output=True, text=True
         ).stdout.strip()
@@ -67,6 +106,9 @@ def run_at(ref: str, materials, options: list[str], keep: Path | None) -> dict:
         t0 = time.perf_counter()
         status = subprocess.run(cmd, cwd=clone, env=env).returncode
         wall = time.perf_counter() - t0
+        parts = wall_parts(out / "run.log") if resume is not None else None
+        if parts:
+            wall = sum(p["wall_s"] for p in parts[:-1]) + wall
         per = {}
         for code in materials:
             path = out / code / "summary.json"
@@ -74,8 +116,11 @@ def run_at(ref: str, materials, options: list[str], keep: Path | None) -> dict:
         if keep is not None:
             shutil.copytree(out, keep / commit, dirs_exist_ok=True)
         finished = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
-        return {"ref": ref, "commit": commit, "exit_status": status, "wall_s": round(wall, 1), "finished_utc": finished,
-                "materials": per}  # fmt: skip
+        record = {"ref": ref, "commit": commit, "exit_status": status, "wall_s": round(wall, 1),
+                  "finished_utc": finished, "materials": per}  # fmt: skip
+        if parts:
+            record["parts"] = parts[:-1] + [{**parts[-1], "wall_s": round(time.perf_counter() - t0, 1)}]
+        return record
 
 
 def table(run: dict) -> str:
@@ -108,13 +153,19 @@ def main(argv=None) -> int:
     )
     parser.add_argument("--save-json", type=Path, help="also write the run of --ref (default HEAD) to this file")
     parser.add_argument("--ref", default="HEAD", help="the code measured as 'ours' (default HEAD)")
+    parser.add_argument(
+        "--resume",
+        type=Path,
+        help="continue a stopped run of this script in its folder (/tmp/bench_main_job_*: clone, cache, results); "
+        "the wall time is then the sum of its parts",
+    )
     args = parser.parse_args(argv)
     if args.reference and args.reference_json:
         parser.error("give --reference or --reference-json, not both")
     options = ["--jobs", str(args.jobs), "--no-progress"]
     if args.max_steps:
         options += ["--max-steps", str(args.max_steps)]
-    runs = {"ours": run_at(args.ref, args.materials, options, args.keep)}
+    runs = {"ours": run_at(args.ref, args.materials, options, args.keep, resume=args.resume)}
     if args.save_json:
         args.save_json.write_text(json.dumps(runs["ours"]))
     print(table(runs["ours"]), flush=True)
