@@ -14,9 +14,10 @@ without a
 summary (the run failed) is reported as missing. The last line is one JSON object with both runs and, when
 both ran, the ratio of their wall times (reference / ours). ``--keep DIR`` keeps the result folders.
 
-A run stopped part way (its process ended) continues with ``--resume /tmp/bench_main_job_XXXX`` (the same
-materials and options): ``peano-bayes run`` picks up in the same clone, cache and results, and the wall time is
-the sum of the parts the results' ``run.log`` records (``parts`` in the JSON).
+The working folder is removed only when the job has finished; a run stopped part way (Ctrl-C, its session
+ended) continues with ``--resume /tmp/bench_main_job_XXXX`` (the path it printed; the same materials and
+options): ``peano-bayes run`` picks up in the same clone, cache and results, and the wall time is the sum of the
+parts the results' ``run.log`` records (``parts`` in the JSON).
 
 Both runs take the machine for most of an hour; to keep them apart but on the same day, measure the reference
 first with ``--ref REF --save-json REF.json`` and later pass ``--reference-json REF.json`` to the run of HEAD.
@@ -26,7 +27,6 @@ from __future__ import annotations
 
 import argparse
 import calendar
-import contextlib
 import json
 import os
 import shutil
@@ -86,41 +86,45 @@ def run_at(ref: str, materials, options: list[str], keep: Path | None, resume: P
     """Clone ``ref`` into a temporary folder, run the main job there, and collect its figures. With ``resume``
     (the folder of an earlier, stopped run of this script: its ``clone``, ``cache`` and ``results``) the job
     continues there instead, and the wall time is the sum of the parts its ``run.log`` records."""
-    with contextlib.ExitStack() as stack:
-        if resume is None:
-            tmp = stack.enter_context(tempfile.TemporaryDirectory(prefix="bench_main_job_"))
-            clone = Path(tmp) / "clone"
-            subprocess.run(["git", "clone", "--quiet", "--no-hardlinks", str(REPO), str(clone)], check=True)
-            subprocess.run(["git", "-C", str(clone), "checkout", "--quiet", ref], check=True)
-        else:
-            tmp, clone = str(resume), resume / "clone"
-            if not (clone / ".git").exists() or not (resume / "results" / "run.log").exists():
-                raise SystemExit(f"--resume {resume}: expected an earlier run's clone/ and results/run.log there")
-        commit = subprocess.run(
-            ["git", "-C", str(clone), "rev-parse", "--short", "HEAD"], check=True, capture_output=True, text=True
-        ).stdout.strip()
-        out = Path(tmp) / "results"
-        env = {**os.environ, "PYTHONPATH": str(clone), "PEANO_BAYES_CACHE": str(Path(tmp) / "cache")}
-        cmd = [sys.executable, "-m", "peano_bayes", "run", "--out", str(out), "--materials", *materials, *options]
-        print(f"{ref} ({commit}): {' '.join(cmd[1:])}", file=sys.stderr, flush=True)
-        t0 = time.perf_counter()
-        status = subprocess.run(cmd, cwd=clone, env=env).returncode
-        wall = time.perf_counter() - t0
-        parts = wall_parts(out / "run.log") if resume is not None else None
-        if parts:
-            wall = sum(p["wall_s"] for p in parts[:-1]) + wall
-        per = {}
-        for code in materials:
-            path = out / code / "summary.json"
-            per[code] = material_figures(json.loads(path.read_text())) if path.exists() else {"missing": True}
-        if keep is not None:
-            shutil.copytree(out, keep / commit, dirs_exist_ok=True)
-        finished = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
-        record = {"ref": ref, "commit": commit, "exit_status": status, "wall_s": round(wall, 1),
-                  "finished_utc": finished, "materials": per}  # fmt: skip
-        if parts:
-            record["parts"] = parts[:-1] + [{**parts[-1], "wall_s": round(time.perf_counter() - t0, 1)}]
-        return record
+    if resume is None:
+        tmp = tempfile.mkdtemp(prefix="bench_main_job_")
+        clone = Path(tmp) / "clone"
+        subprocess.run(["git", "clone", "--quiet", "--no-hardlinks", str(REPO), str(clone)], check=True)
+        subprocess.run(["git", "-C", str(clone), "checkout", "--quiet", ref], check=True)
+    else:
+        tmp, clone = str(resume), resume / "clone"
+        if not (clone / ".git").exists() or not (resume / "results" / "run.log").exists():
+            print(f"--resume {resume}: expected an earlier run's clone/ and results/run.log there", file=sys.stderr)
+            raise SystemExit(2)
+    # the folder goes only when the job has finished: a stopped run (Ctrl-C, a lost session) can be resumed
+    print(f"working in {tmp} (--resume {tmp} continues it if stopped)", file=sys.stderr, flush=True)
+    commit = subprocess.run(
+        ["git", "-C", str(clone), "rev-parse", "--short", "HEAD"], check=True, capture_output=True, text=True
+    ).stdout.strip()
+    out = Path(tmp) / "results"
+    env = {**os.environ, "PYTHONPATH": str(clone), "PEANO_BAYES_CACHE": str(Path(tmp) / "cache")}
+    cmd = [sys.executable, "-m", "peano_bayes", "run", "--out", str(out), "--materials", *materials, *options]
+    print(f"{ref} ({commit}): {' '.join(cmd[1:])}", file=sys.stderr, flush=True)
+    t0 = time.perf_counter()
+    status = subprocess.run(cmd, cwd=clone, env=env).returncode
+    this_part = wall = time.perf_counter() - t0
+    parts = wall_parts(out / "run.log") if resume is not None else None
+    if parts:
+        wall = sum(p["wall_s"] for p in parts[:-1]) + this_part
+    per = {}
+    for code in materials:
+        path = out / code / "summary.json"
+        per[code] = material_figures(json.loads(path.read_text())) if path.exists() else {"missing": True}
+    if keep is not None:
+        shutil.copytree(out, keep / commit, dirs_exist_ok=True)
+    finished = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+    record = {"ref": ref, "commit": commit, "exit_status": status, "wall_s": round(wall, 1),
+              "finished_utc": finished, "materials": per}  # fmt: skip
+    if parts:
+        record["parts"] = parts[:-1] + [{**parts[-1], "wall_s": round(this_part, 1)}]
+    if status in (0, 3):  # finished (3: written, some material unconverged); otherwise kept for --resume
+        shutil.rmtree(tmp)
+    return record
 
 
 def table(run: dict) -> str:
