@@ -57,16 +57,19 @@ def material_figures(summary: dict) -> dict:
     }
 
 
-def wall_parts(run_log: Path) -> list[dict]:
+def wall_parts(run_log: Path, before: float | None = None) -> list[dict]:
     """The invocations recorded in a main job's ``run.log``: each part begins at its ``running N dataset(s)``
     line and ends at its last line before the next part began (or the file's last line), timestamps to the
     second. A part that was stopped ends at its last logged line, so its wall is short by up to one log interval
-    (a sampling check, a few minutes at most)."""
+    (a sampling check, a few minutes at most). ``before`` (epoch seconds): only lines logged before it count, so
+    a later invocation that logs no ``running`` line (one material left) cannot stretch the earlier parts."""
     stamps: list[tuple[float, str]] = []
     for line in run_log.read_text().splitlines():
         stamp, _, text = line.partition(" ")
         try:
-            stamps.append((calendar.timegm(time.strptime(stamp, "%Y-%m-%dT%H:%M:%SZ")), text))
+            at = calendar.timegm(time.strptime(stamp, "%Y-%m-%dT%H:%M:%SZ"))
+            if before is None or at < before:
+                stamps.append((at, text))
         except ValueError:
             continue  # a continuation line of a multi-line message
     starts = [i for i, (_, text) in enumerate(stamps) if text.startswith("running ") and "dataset(s)" in text]
@@ -105,12 +108,12 @@ def run_at(ref: str, materials, options: list[str], keep: Path | None, resume: P
     env = {**os.environ, "PYTHONPATH": str(clone), "PEANO_BAYES_CACHE": str(Path(tmp) / "cache")}
     cmd = [sys.executable, "-m", "peano_bayes", "run", "--out", str(out), "--materials", *materials, *options]
     print(f"{ref} ({commit}): {' '.join(cmd[1:])}", file=sys.stderr, flush=True)
-    t0 = time.perf_counter()
+    started, t0 = time.time(), time.perf_counter()
     status = subprocess.run(cmd, cwd=clone, env=env).returncode
     this_part = wall = time.perf_counter() - t0
-    parts = wall_parts(out / "run.log") if resume is not None else None
+    parts = wall_parts(out / "run.log", before=started) if resume is not None else None
     if parts:
-        wall = sum(p["wall_s"] for p in parts[:-1]) + this_part
+        wall = sum(p["wall_s"] for p in parts) + this_part
     per = {}
     for code in materials:
         path = out / code / "summary.json"
@@ -121,7 +124,8 @@ def run_at(ref: str, materials, options: list[str], keep: Path | None, resume: P
     record = {"ref": ref, "commit": commit, "exit_status": status, "wall_s": round(wall, 1),
               "finished_utc": finished, "materials": per}  # fmt: skip
     if parts:
-        record["parts"] = parts[:-1] + [{**parts[-1], "wall_s": round(this_part, 1)}]
+        this = {"start_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(started)), "wall_s": round(this_part, 1)}
+        record["parts"] = [*parts, this]
     if status in (0, 3):  # finished (3: written, some material unconverged); otherwise kept for --resume
         shutil.rmtree(tmp)
     return record
